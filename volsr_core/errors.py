@@ -1,0 +1,20 @@
+"""Errors that VolSR reports to people: one line, naming the file and the problem."""
+from __future__ import annotations
+
+import os
+
+
+class VolSRError(Exception):
+    """Base class of every error VolSR reports; the CLI prints ``str(err)`` and exits 2."""
+
+
+class InputError(VolSRError):
+    """Bad input: a missing, unreadable, malformed or unsupported file or folder.
+
+    ``str(err)`` is ``"<path>: <problem>"`` on one line.
+    """
+
+    def __init__(self, path: str | os.PathLike | None, problem: str):
+        self.path = None if path is None else os.fspath(path)
+        self.problem = " ".join(str(problem).split())  # always one line
+        super().__init__(self.problem if self.path is None else f"{self.path}: {self.problem}")

@@ -1,0 +1,3 @@
+"""PLACEHOLDER: helper A replaces this file."""
+def list_dicom_series(path):
+    raise NotImplementedError

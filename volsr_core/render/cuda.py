@@ -1,0 +1,49 @@
+"""The ray-cast kernel for CUDA (numba-cuda): the same ray program as the CPU, one thread per pixel.
+
+Importing this module needs ``numba.cuda`` (the ``numba-cuda`` package). Set
+``NUMBA_ENABLE_CUDASIM=1`` before importing numba to run it in Numba's CUDA simulator (slow:
+tiny images only), which is how CI checks it on machines without a GPU.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import cuda
+
+from volsr_core.render.stages import build_ray_program
+
+march_ray = build_ray_program(cuda.jit(device=True, inline=True))
+
+THREADS = (16, 8)
+
+
+@cuda.jit
+def _render_pixels(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out):
+    x, y = cuda.grid(2)
+    if y < out.shape[0] and x < out.shape[1]:
+        march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out)
+
+
+class CudaVolume:
+    """Device copies of a volume and its empty-space mask, kept between frames."""
+
+    def __init__(self, vol: np.ndarray):
+        self.vol = cuda.to_device(vol)
+        self._empty_host: np.ndarray | None = None
+        self.empty = None
+
+    def set_empty(self, empty: np.ndarray) -> None:
+        if self._empty_host is not empty:
+            self.empty = cuda.to_device(empty)
+            self._empty_host = empty
+
+
+def render_cuda(volume: CudaVolume, lut: np.ndarray, glut: np.ndarray, cam: np.ndarray, w2i: np.ndarray,
+                grad_w: np.ndarray, params: np.ndarray, prev_vp: np.ndarray, out: np.ndarray) -> None:
+    """Fill host array ``out`` (H, W, OUT_CHANNELS) on the GPU."""
+    height, width = out.shape[:2]
+    d_out = cuda.device_array(out.shape, dtype=out.dtype)
+    blocks = ((width + THREADS[0] - 1) // THREADS[0], (height + THREADS[1] - 1) // THREADS[1])
+    _render_pixels[blocks, THREADS](volume.vol, volume.empty, cuda.to_device(lut), cuda.to_device(glut),
+                                    cuda.to_device(cam), cuda.to_device(w2i), cuda.to_device(grad_w),
+                                    cuda.to_device(params), cuda.to_device(prev_vp), d_out)
+    d_out.copy_to_host(out)

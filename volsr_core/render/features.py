@@ -1,0 +1,83 @@
+"""FeatureFrame: everything one ray-cast pass emits, float32 (H, W, C), pixel (0, 0) top left."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from volsr_core.atomic import atomic_write
+from volsr_core.render.layout import (
+    OUT_ALPHA, OUT_CHANNELS, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA, OUT_MOTION, OUT_POSITION,
+)
+from volsr_core.scene.camera import Camera
+
+
+@dataclass
+class FeatureFrame:
+    """One rendered frame and its feature buffers (views into one packed float32 array).
+
+    - ``color`` (H, W, 3): RGB composited front to back over the background, in [0, 1];
+    - ``alpha`` (H, W): accumulated opacity;
+    - ``depth`` (H, W): quasi-depth of the sample of maximum alpha, *normalised*: the view-space
+      distance along the view direction mapped linearly so that the front of the volume's
+      bounding sphere is 0 and its back is 1 (stable while the camera orbits); 1 for background;
+    - ``max_rgba`` (H, W, 4): shaded RGB and step-corrected alpha of that sample; 0 for background;
+    - ``position`` (H, W, 3): its world position in mm (LPS); background pixels (``max_rgba``
+      alpha 0) hold their ray's point on the focal plane;
+    - ``motion`` (H, W, 2): pixels from the current pixel to where ``position`` was in the
+      previous frame, (dx, dy) with +y down, jitter excluded: ``prev[y + dy, x + dx]``
+      backward-warps. Zero when no previous camera was given;
+    - ``jitter``: the sub-pixel offset (pixels, +y down) every ray was shifted by.
+    """
+
+    data: np.ndarray
+    camera: Camera
+    jitter: tuple[float, float] = (0.0, 0.0)
+    previous_camera: Camera | None = None
+
+    def __post_init__(self) -> None:
+        if self.data.ndim != 3 or self.data.shape[2] != OUT_CHANNELS:
+            raise ValueError(f"feature data must be (H, W, {OUT_CHANNELS}), got {self.data.shape}")
+
+    @property
+    def height(self) -> int:
+        return self.data.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.data.shape[1]
+
+    @property
+    def color(self) -> np.ndarray:
+        return self.data[..., OUT_COLOR:OUT_COLOR + 3]
+
+    @property
+    def alpha(self) -> np.ndarray:
+        return self.data[..., OUT_ALPHA]
+
+    @property
+    def depth(self) -> np.ndarray:
+        return self.data[..., OUT_DEPTH]
+
+    @property
+    def max_rgba(self) -> np.ndarray:
+        return self.data[..., OUT_MAX_RGBA:OUT_MAX_RGBA + 4]
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.data[..., OUT_POSITION:OUT_POSITION + 3]
+
+    @property
+    def motion(self) -> np.ndarray:
+        return self.data[..., OUT_MOTION:OUT_MOTION + 2]
+
+    def to_uint8(self) -> np.ndarray:
+        """The colour as an (H, W, 3) uint8 image, ready for PNG."""
+        return np.clip(np.rint(self.color * 255.0), 0, 255).astype(np.uint8)
+
+    def save_npz(self, path: str | os.PathLike) -> None:
+        """Write every buffer to a compressed .npz, atomically (temporary name, then rename)."""
+        arrays = {name: getattr(self, name) for name in ("color", "alpha", "depth", "max_rgba", "position", "motion")}
+        with atomic_write(path) as fh:
+            np.savez_compressed(fh, jitter=np.asarray(self.jitter, dtype=np.float32), **arrays)

@@ -1,0 +1,145 @@
+"""RayCaster: one object per volume + transfer function that turns a camera into a FeatureFrame."""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from volsr_core.render import layout as L
+from volsr_core.render.classification import ClassificationTables, block_min_max, build_tables, empty_blocks
+from volsr_core.render.features import FeatureFrame
+from volsr_core.scene.camera import Camera
+from volsr_core.scene.transfer_function import TransferFunction
+from volsr_core.scene.volume import Volume
+
+DEVICES = ("cpu", "cuda")
+
+
+class RayCaster:
+    """Direct volume rendering by ray casting, emitting colour and feature buffers in one pass.
+
+    Per pixel a ray through the pixel centre plus the frame's jitter is clipped to the camera's
+    near/far planes and to the volume's oriented box (voxel centres); samples lie
+    ``sample_distance`` mm apart (default: half the smallest spacing), are interpolated
+    trilinearly, classified by the transfer function (opacity corrected for the step), shaded
+    with Blinn-Phong and a headlight when the transfer function says so, and composited front
+    to back until the accumulated alpha reaches ``early_termination``. Bricks of ``block_size``
+    voxels that the transfer function makes fully transparent are skipped.
+
+    ``device="cuda"`` runs the same ray program through numba-cuda (or its simulator).
+    """
+
+    def __init__(self, volume: Volume, transfer_function: TransferFunction, *,
+                 sample_distance: float | None = None, early_termination: float = 0.99,
+                 empty_space_skipping: bool = True, block_size: int = 8,
+                 background: Sequence[float] = (0.0, 0.0, 0.0), start_jitter: bool = False,
+                 device: str = "cpu", lut_size: int = 4096):
+        if device not in DEVICES:
+            raise ValueError(f"device must be one of {DEVICES}, got {device!r}")
+        if not 0.0 < early_termination <= 1.0:
+            raise ValueError("early_termination must lie in (0, 1]")
+        self.volume = volume
+        self.sample_distance = float(sample_distance or 0.5 * min(volume.spacing))
+        if self.sample_distance <= 0:
+            raise ValueError("sample_distance must be positive")
+        self.early_termination = float(early_termination)
+        self.empty_space_skipping = bool(empty_space_skipping)
+        self.block_size = int(block_size)
+        self.background = tuple(float(c) for c in background)
+        self.start_jitter = bool(start_jitter)
+        self.device = device
+        self.lut_size = int(lut_size)
+        self._block_lo, self._block_hi = block_min_max(volume.array, self.block_size)
+        m = volume.direction @ np.diag(volume.spacing)
+        self._w2i = np.ascontiguousarray(volume.world_to_index[:3, :], dtype=np.float64)
+        self._grad_w = np.ascontiguousarray(np.linalg.inv(m).T, dtype=np.float64)
+        corners = volume.corners
+        self._sphere_center = corners.mean(axis=0)
+        self._sphere_radius = 0.5 * float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
+        self._cuda_volume = None
+        if device == "cuda":
+            from volsr_core.render.cuda import CudaVolume
+            self._cuda_volume = CudaVolume(volume.array)
+        self.transfer_function = transfer_function
+
+    @property
+    def transfer_function(self) -> TransferFunction:
+        return self._tf
+
+    @transfer_function.setter
+    def transfer_function(self, tf: TransferFunction) -> None:
+        """Set the transfer function: rebuilds the LUTs and the empty-brick mask (milliseconds)."""
+        self._tf = tf
+        self.tables: ClassificationTables = build_tables(tf, self.volume.value_range, self.sample_distance,
+                                                         self.lut_size)
+        if self.empty_space_skipping:
+            self._empty = empty_blocks(self._block_lo, self._block_hi, self.tables)
+        else:
+            self._empty = np.zeros(self._block_lo.shape, dtype=np.uint8)
+
+    def _params(self, seed: int, has_prev: bool) -> np.ndarray:
+        tf, t = self._tf, self.tables
+        p = np.zeros(L.P_SIZE)
+        p[L.P_STEP] = self.sample_distance
+        p[L.P_ERT] = self.early_termination
+        p[L.P_AMBIENT], p[L.P_DIFFUSE] = tf.ambient, tf.diffuse
+        p[L.P_SPECULAR], p[L.P_SPEC_POWER] = tf.specular, tf.specular_power
+        p[L.P_SHADE] = float(tf.shade)
+        p[L.P_GRAD_OPACITY] = float(t.uses_gradient_opacity)
+        p[L.P_LUT_X0], p[L.P_LUT_INV_DX] = t.x0, t.inv_dx
+        p[L.P_GLUT_INV_DX] = t.gradient_inv_dx
+        p[L.P_BG_R:L.P_BG_B + 1] = self.background
+        p[L.P_START_JITTER] = float(self.start_jitter)
+        p[L.P_SEED] = float(seed % 2**31)
+        p[L.P_BLOCK] = float(self.block_size)
+        p[L.P_HAS_PREV] = float(has_prev)
+        return p
+
+    def _camera_array(self, camera: Camera, width: int, height: int, jitter: tuple[float, float]) -> np.ndarray:
+        right, up, forward = camera.basis()
+        c = np.zeros(L.CAM_SIZE)
+        c[L.CAM_POS:L.CAM_POS + 3] = camera.position
+        c[L.CAM_RIGHT:L.CAM_RIGHT + 3] = right
+        c[L.CAM_UP:L.CAM_UP + 3] = up
+        c[L.CAM_FWD:L.CAM_FWD + 3] = forward
+        half_h = camera.parallel_scale if camera.parallel_projection else math.tan(math.radians(camera.view_angle) / 2)
+        c[L.CAM_HALF_W], c[L.CAM_HALF_H] = half_h * width / height, half_h
+        c[L.CAM_PARALLEL] = float(camera.parallel_projection)
+        c[L.CAM_NEAR], c[L.CAM_FAR] = camera.clipping_range
+        c[L.CAM_JITTER_X], c[L.CAM_JITTER_Y] = jitter
+        center_depth = float((self._sphere_center - camera.position) @ forward)
+        c[L.CAM_DEPTH_LO] = center_depth - self._sphere_radius
+        c[L.CAM_DEPTH_SPAN] = 2.0 * self._sphere_radius
+        c[L.CAM_FOCAL_DEPTH] = float((camera.focal_point - camera.position) @ forward)
+        return c
+
+    def render(self, camera: Camera, width: int, height: int | None = None, *,
+               jitter: Sequence[float] = (0.0, 0.0), previous_camera: Camera | None = None,
+               seed: int = 0, out: np.ndarray | None = None) -> FeatureFrame:
+        """Render ``width`` x ``height`` pixels (height defaults to width) seen by ``camera``.
+
+        ``jitter`` shifts every ray by (jx, jy) pixels (+y down), e.g. a Halton offset in
+        [-0.5, 0.5); ``previous_camera`` enables motion vectors; ``seed`` drives the per-ray
+        start jitter when it is on; ``out`` may pass a float32 (H, W, 14) array to reuse.
+        """
+        height = width if height is None else height
+        if width < 1 or height < 1:
+            raise ValueError(f"image size must be positive, got {width}x{height}")
+        jitter = (float(jitter[0]), float(jitter[1]))
+        if out is None or out.shape != (height, width, L.OUT_CHANNELS) or out.dtype != np.float32:
+            out = np.empty((height, width, L.OUT_CHANNELS), dtype=np.float32)
+        cam = self._camera_array(camera, width, height, jitter)
+        prev_vp = np.eye(4) if previous_camera is None else previous_camera.view_projection(width / height)
+        params = self._params(seed, previous_camera is not None)
+        t = self.tables
+        if self.device == "cuda":
+            from volsr_core.render.cuda import render_cuda
+            self._cuda_volume.set_empty(self._empty)
+            render_cuda(self._cuda_volume, t.rgba, t.gradient_opacity, cam, self._w2i, self._grad_w, params,
+                        np.ascontiguousarray(prev_vp), out)
+        else:
+            from volsr_core.render.cpu import render_cpu
+            render_cpu(self.volume.array, self._empty, t.rgba, t.gradient_opacity, cam, self._w2i, self._grad_w,
+                       params, np.ascontiguousarray(prev_vp), out)
+        return FeatureFrame(out, camera, jitter, previous_camera)

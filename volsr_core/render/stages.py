@@ -1,0 +1,280 @@
+"""The ray loop, cut into named stages like VTK's raycasterfs.glsl, written once for CPU and CUDA.
+
+:func:`build_ray_program` takes a decorator (``numba.njit(inline="always")`` for the CPU,
+``numba.cuda.jit(device=True)`` for CUDA) and returns ``march_ray``, the per-pixel program built
+from the stages below. Only scalar maths, ``math`` functions and array indexing appear here, so
+the same source compiles for both targets.
+
+Stages, per ray: setup (ray through the jittered pixel, clipped to the near/far planes and the
+volume box) -> per sample: skip (empty-space blocks) -> sample (trilinear) -> classify (transfer
+function LUT, opacity already corrected for the step) -> gradient (central differences, world
+units) -> shade (Blinn-Phong headlight) -> composite (front to back, early termination) ->
+finish (background, features at the sample of maximum alpha, motion vector).
+
+Geometry: ``w2i`` (3x4) maps world mm to continuous voxel index (i, j, k) = (x, y, z); the volume
+box is [0, n-1] per axis (voxel centres), ``vol[k, j, i]``. ``grad_w`` (3x3) maps an index-space
+gradient to a world gradient (value units per mm).
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+from volsr_core.render.layout import (
+    CAM_DEPTH_LO, CAM_DEPTH_SPAN, CAM_FAR, CAM_FOCAL_DEPTH, CAM_FWD, CAM_HALF_H, CAM_HALF_W, CAM_JITTER_X,
+    CAM_JITTER_Y, CAM_NEAR, CAM_PARALLEL, CAM_POS, CAM_RIGHT, CAM_UP, OUT_ALPHA, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA,
+    OUT_MOTION, OUT_POSITION, P_AMBIENT, P_BG_B, P_BG_G, P_BG_R, P_BLOCK, P_DIFFUSE, P_ERT, P_GLUT_INV_DX,
+    P_GRAD_OPACITY, P_HAS_PREV, P_LUT_INV_DX, P_LUT_X0, P_SEED, P_SHADE, P_SPEC_POWER, P_SPECULAR, P_START_JITTER,
+    P_STEP,
+)
+
+
+def build_ray_program(jit: Callable) -> Callable:
+    """Compile the stages with ``jit`` and return ``march_ray(x, y, vol, empty, lut, glut, cam, w2i,
+    grad_w, params, prev_vp, out)``, which renders pixel (x, y) into ``out[y, x, :]``."""
+
+    @jit
+    def hash_unit(x, y, seed):
+        """A deterministic pseudo-random number in [0, 1) from a pixel and a seed (PCG-style hash)."""
+        h = (x * 73856093 + y * 19349663 + seed * 83492791 + 12345) & 0xFFFFFFFF
+        h = ((h ^ (h >> 16)) * 0x45D9F3B) & 0xFFFFFFFF
+        h = ((h ^ (h >> 16)) * 0x45D9F3B) & 0xFFFFFFFF
+        h = h ^ (h >> 16)
+        return (h & 0xFFFFFF) / 16777216.0
+
+    @jit
+    def setup_ray(x, y, width, height, cam):
+        """World origin and unit direction of the ray through pixel (x, y) plus the camera jitter."""
+        nx = 2.0 * (x + 0.5 + cam[CAM_JITTER_X]) / width - 1.0
+        ny = 1.0 - 2.0 * (y + 0.5 + cam[CAM_JITTER_Y]) / height
+        sx = nx * cam[CAM_HALF_W]
+        sy = ny * cam[CAM_HALF_H]
+        if cam[CAM_PARALLEL] > 0.5:
+            ox = cam[CAM_POS] + sx * cam[CAM_RIGHT] + sy * cam[CAM_UP]
+            oy = cam[CAM_POS + 1] + sx * cam[CAM_RIGHT + 1] + sy * cam[CAM_UP + 1]
+            oz = cam[CAM_POS + 2] + sx * cam[CAM_RIGHT + 2] + sy * cam[CAM_UP + 2]
+            return ox, oy, oz, cam[CAM_FWD], cam[CAM_FWD + 1], cam[CAM_FWD + 2]
+        dx = cam[CAM_FWD] + sx * cam[CAM_RIGHT] + sy * cam[CAM_UP]
+        dy = cam[CAM_FWD + 1] + sx * cam[CAM_RIGHT + 1] + sy * cam[CAM_UP + 1]
+        dz = cam[CAM_FWD + 2] + sx * cam[CAM_RIGHT + 2] + sy * cam[CAM_UP + 2]
+        inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+        return cam[CAM_POS], cam[CAM_POS + 1], cam[CAM_POS + 2], dx * inv, dy * inv, dz * inv
+
+    @jit
+    def clip_slab(o, d, hi, t0, t1):
+        """Clip the interval [t0, t1] of o + t d to the slab 0 <= coordinate <= hi."""
+        if abs(d) < 1e-12:
+            if o < 0.0 or o > hi:
+                return 1.0, 0.0
+            return t0, t1
+        a = (0.0 - o) / d
+        b = (hi - o) / d
+        if a > b:
+            a, b = b, a
+        return max(t0, a), min(t1, b)
+
+    @jit
+    def sample(vol, px, py, pz):
+        """Trilinear interpolation of vol[k, j, i] at continuous index (px, py, pz), clamped to the box."""
+        nz, ny, nx = vol.shape
+        px = min(max(px, 0.0), nx - 1.0)
+        py = min(max(py, 0.0), ny - 1.0)
+        pz = min(max(pz, 0.0), nz - 1.0)
+        i = min(int(px), nx - 2)
+        j = min(int(py), ny - 2)
+        k = min(int(pz), nz - 2)
+        fx, fy, fz = px - i, py - j, pz - k
+        c00 = vol[k, j, i] * (1.0 - fx) + vol[k, j, i + 1] * fx
+        c10 = vol[k, j + 1, i] * (1.0 - fx) + vol[k, j + 1, i + 1] * fx
+        c01 = vol[k + 1, j, i] * (1.0 - fx) + vol[k + 1, j, i + 1] * fx
+        c11 = vol[k + 1, j + 1, i] * (1.0 - fx) + vol[k + 1, j + 1, i + 1] * fx
+        c0 = c00 * (1.0 - fy) + c10 * fy
+        c1 = c01 * (1.0 - fy) + c11 * fy
+        return c0 * (1.0 - fz) + c1 * fz
+
+    @jit
+    def classify(value, lut, params):
+        """RGBA from the transfer-function LUT (linear between entries; alpha corrected for the step)."""
+        n = lut.shape[0]
+        f = (value - params[P_LUT_X0]) * params[P_LUT_INV_DX]
+        f = min(max(f, 0.0), n - 1.0)
+        i = min(int(f), n - 2)
+        w = f - i
+        r = lut[i, 0] * (1.0 - w) + lut[i + 1, 0] * w
+        g = lut[i, 1] * (1.0 - w) + lut[i + 1, 1] * w
+        b = lut[i, 2] * (1.0 - w) + lut[i + 1, 2] * w
+        a = lut[i, 3] * (1.0 - w) + lut[i + 1, 3] * w
+        return r, g, b, a
+
+    @jit
+    def gradient(vol, px, py, pz, grad_w):
+        """World-space gradient (value units per mm) by central differences one voxel apart."""
+        gi = 0.5 * (sample(vol, px + 1.0, py, pz) - sample(vol, px - 1.0, py, pz))
+        gj = 0.5 * (sample(vol, px, py + 1.0, pz) - sample(vol, px, py - 1.0, pz))
+        gk = 0.5 * (sample(vol, px, py, pz + 1.0) - sample(vol, px, py, pz - 1.0))
+        gx = grad_w[0, 0] * gi + grad_w[0, 1] * gj + grad_w[0, 2] * gk
+        gy = grad_w[1, 0] * gi + grad_w[1, 1] * gj + grad_w[1, 2] * gk
+        gz = grad_w[2, 0] * gi + grad_w[2, 1] * gj + grad_w[2, 2] * gk
+        return gx, gy, gz
+
+    @jit
+    def gradient_opacity(magnitude, glut, params):
+        """Gradient-opacity factor from its LUT (linear between entries, clamped)."""
+        n = glut.shape[0]
+        f = min(max(magnitude * params[P_GLUT_INV_DX], 0.0), n - 1.0)
+        i = min(int(f), n - 2)
+        w = f - i
+        return glut[i] * (1.0 - w) + glut[i + 1] * w
+
+    @jit
+    def shade(r, g, b, gx, gy, gz, gmag, dx, dy, dz, params):
+        """Blinn-Phong with a headlight (light and eye along -ray), two-sided, white light.
+
+        Where the gradient vanishes the sample is lit as if it faced the light.
+        """
+        ndotl = 1.0
+        if gmag > 1e-6:
+            ndotl = abs(gx * dx + gy * dy + gz * dz) / gmag
+        diffuse = params[P_AMBIENT] + params[P_DIFFUSE] * ndotl
+        spec = params[P_SPECULAR] * math.pow(ndotl, params[P_SPEC_POWER])  # half vector = light dir
+        return min(r * diffuse + spec, 1.0), min(g * diffuse + spec, 1.0), min(b * diffuse + spec, 1.0)
+
+    @jit
+    def block_exit(px, py, pz, dx, dy, dz, block, t):
+        """Ray parameter where the ray at index position p (parameter t) leaves its block."""
+        best = 1e30
+        if dx > 1e-12:
+            best = min(best, ((math.floor(px / block) + 1.0) * block - px) / dx)
+        elif dx < -1e-12:
+            best = min(best, (math.floor(px / block) * block - px) / dx)
+        if dy > 1e-12:
+            best = min(best, ((math.floor(py / block) + 1.0) * block - py) / dy)
+        elif dy < -1e-12:
+            best = min(best, (math.floor(py / block) * block - py) / dy)
+        if dz > 1e-12:
+            best = min(best, ((math.floor(pz / block) + 1.0) * block - pz) / dz)
+        elif dz < -1e-12:
+            best = min(best, (math.floor(pz / block) * block - pz) / dz)
+        return t + best
+
+    @jit
+    def finish(x, y, width, height, out, cr, cg, cb, ca, mr, mg, mb, ma, wx, wy, wz, cam, params, prev_vp):
+        """Write colour over the background, max-alpha features and the motion vector for pixel (x, y)."""
+        out[y, x, OUT_COLOR] = cr + (1.0 - ca) * params[P_BG_R]
+        out[y, x, OUT_COLOR + 1] = cg + (1.0 - ca) * params[P_BG_G]
+        out[y, x, OUT_COLOR + 2] = cb + (1.0 - ca) * params[P_BG_B]
+        out[y, x, OUT_ALPHA] = ca
+        out[y, x, OUT_MAX_RGBA] = mr
+        out[y, x, OUT_MAX_RGBA + 1] = mg
+        out[y, x, OUT_MAX_RGBA + 2] = mb
+        out[y, x, OUT_MAX_RGBA + 3] = ma
+        out[y, x, OUT_POSITION] = wx
+        out[y, x, OUT_POSITION + 1] = wy
+        out[y, x, OUT_POSITION + 2] = wz
+        depth = 1.0
+        if ma > 0.0:
+            z = ((wx - cam[CAM_POS]) * cam[CAM_FWD] + (wy - cam[CAM_POS + 1]) * cam[CAM_FWD + 1]
+                 + (wz - cam[CAM_POS + 2]) * cam[CAM_FWD + 2])
+            depth = min(max((z - cam[CAM_DEPTH_LO]) / cam[CAM_DEPTH_SPAN], 0.0), 1.0)
+        out[y, x, OUT_DEPTH] = depth
+        mx = 0.0
+        my = 0.0
+        if params[P_HAS_PREV] > 0.5:
+            cx = prev_vp[0, 0] * wx + prev_vp[0, 1] * wy + prev_vp[0, 2] * wz + prev_vp[0, 3]
+            cy = prev_vp[1, 0] * wx + prev_vp[1, 1] * wy + prev_vp[1, 2] * wz + prev_vp[1, 3]
+            cw = prev_vp[3, 0] * wx + prev_vp[3, 1] * wy + prev_vp[3, 2] * wz + prev_vp[3, 3]
+            if cw > 1e-12:
+                prev_px = (cx / cw + 1.0) * 0.5 * width
+                prev_py = (1.0 - cy / cw) * 0.5 * height
+                mx = prev_px - (x + 0.5 + cam[CAM_JITTER_X])
+                my = prev_py - (y + 0.5 + cam[CAM_JITTER_Y])
+        out[y, x, OUT_MOTION] = mx
+        out[y, x, OUT_MOTION + 1] = my
+
+    @jit
+    def march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out):
+        """Render pixel (x, y): the whole ray loop."""
+        height = out.shape[0]
+        width = out.shape[1]
+        ox, oy, oz, dx, dy, dz = setup_ray(x, y, width, height, cam)
+        # near/far planes are distances along the view direction; convert to ray parameters
+        cosv = dx * cam[CAM_FWD] + dy * cam[CAM_FWD + 1] + dz * cam[CAM_FWD + 2]
+        t0 = cam[CAM_NEAR] / cosv
+        t1 = cam[CAM_FAR] / cosv
+        if cam[CAM_PARALLEL] > 0.5:
+            t0 = cam[CAM_NEAR]
+            t1 = cam[CAM_FAR]
+        # index-space ray: p(t) = oi + t * di, t in world mm along the unit world direction
+        oi = w2i[0, 0] * ox + w2i[0, 1] * oy + w2i[0, 2] * oz + w2i[0, 3]
+        oj = w2i[1, 0] * ox + w2i[1, 1] * oy + w2i[1, 2] * oz + w2i[1, 3]
+        ok = w2i[2, 0] * ox + w2i[2, 1] * oy + w2i[2, 2] * oz + w2i[2, 3]
+        di = w2i[0, 0] * dx + w2i[0, 1] * dy + w2i[0, 2] * dz
+        dj = w2i[1, 0] * dx + w2i[1, 1] * dy + w2i[1, 2] * dz
+        dk = w2i[2, 0] * dx + w2i[2, 1] * dy + w2i[2, 2] * dz
+        nz, ny, nx = vol.shape
+        t0, t1 = clip_slab(oi, di, nx - 1.0, t0, t1)
+        t0, t1 = clip_slab(oj, dj, ny - 1.0, t0, t1)
+        t0, t1 = clip_slab(ok, dk, nz - 1.0, t0, t1)
+
+        step = params[P_STEP]
+        block = params[P_BLOCK]
+        ert = params[P_ERT]
+        shading = params[P_SHADE] > 0.5
+        use_gop = params[P_GRAD_OPACITY] > 0.5
+        cr = 0.0
+        cg = 0.0
+        cb = 0.0
+        ca = 0.0
+        mr = 0.0
+        mg = 0.0
+        mb = 0.0
+        ma = 0.0
+        tmax_alpha = cam[CAM_FOCAL_DEPTH] / cosv
+        if cam[CAM_PARALLEL] > 0.5:
+            tmax_alpha = cam[CAM_FOCAL_DEPTH]
+        if t0 <= t1:
+            if params[P_START_JITTER] > 0.5:
+                t0 += step * hash_unit(x, y, int(params[P_SEED]))
+            n_steps = int(math.floor((t1 - t0) / step)) + 1
+            k = 0
+            while k < n_steps:
+                t = t0 + k * step
+                px = oi + t * di
+                py = oj + t * dj
+                pz = ok + t * dk
+                bi = int(max(px, 0.0) / block)
+                bj = int(max(py, 0.0) / block)
+                bk = int(max(pz, 0.0) / block)
+                if empty[min(bk, empty.shape[0] - 1), min(bj, empty.shape[1] - 1), min(bi, empty.shape[2] - 1)]:
+                    t_exit = block_exit(px, py, pz, di, dj, dk, block, t)
+                    k_next = int(math.ceil((t_exit - t0) / step - 1e-9))
+                    k = max(k_next, k + 1)
+                    continue
+                value = sample(vol, px, py, pz)
+                r, g, b, a = classify(value, lut, params)
+                if a > 0.0:
+                    if shading or use_gop:
+                        gx, gy, gz = gradient(vol, px, py, pz, grad_w)
+                        gmag = math.sqrt(gx * gx + gy * gy + gz * gz)
+                        if use_gop:
+                            a *= gradient_opacity(gmag, glut, params)
+                        if shading:
+                            r, g, b = shade(r, g, b, gx, gy, gz, gmag, dx, dy, dz, params)
+                    if a > ma:
+                        ma = a
+                        mr = r
+                        mg = g
+                        mb = b
+                        tmax_alpha = t
+                    w = (1.0 - ca) * a
+                    cr += w * r
+                    cg += w * g
+                    cb += w * b
+                    ca += w
+                    if ca >= ert:
+                        break
+                k += 1
+        finish(x, y, width, height, out, cr, cg, cb, ca, mr, mg, mb, ma,
+               ox + tmax_alpha * dx, oy + tmax_alpha * dy, oz + tmax_alpha * dz, cam, params, prev_vp)
+
+    return march_ray

@@ -1,0 +1,27 @@
+"""Supersampled ground truth: the average of N jittered renders of a static camera."""
+from __future__ import annotations
+
+import numpy as np
+
+from volsr_core.render.raycaster import RayCaster
+from volsr_core.scene.camera import Camera
+from volsr_core.temporal.jitter import halton_jitter
+
+
+def render_supersampled(raycaster: RayCaster, camera: Camera, width: int, height: int | None = None,
+                        spp: int = 16) -> np.ndarray:
+    """(H, W, 3) float32 colour averaged over ``spp`` Halton(2, 3) jitter offsets (a box filter).
+
+    ``spp=1`` renders the pixel centres without jitter.
+    """
+    if spp < 1:
+        raise ValueError("spp must be at least 1")
+    if spp == 1:
+        return raycaster.render(camera, width, height).color.copy()
+    acc = None
+    buffer = None
+    for i in range(spp):
+        frame = raycaster.render(camera, width, height, jitter=halton_jitter(i, spp), seed=i, out=buffer)
+        buffer = frame.data
+        acc = frame.color.astype(np.float64) if acc is None else acc + frame.color
+    return (acc / spp).astype(np.float32)
