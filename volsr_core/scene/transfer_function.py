@@ -29,7 +29,7 @@ def _interp(x: np.ndarray | float, pts: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(x, pts[:, 0], pts[:, c]) for c in range(1, pts.shape[1])], axis=-1)
 
 
-@dataclass
+@dataclass(eq=False)
 class TransferFunction:
     """Colour, opacity and lighting for direct volume rendering (VTK's vtkVolumeProperty terms).
 
@@ -108,7 +108,8 @@ class TransferFunction:
             grad = self.gradient_opacity.copy()
             grad[:, 0] *= abs(k)
         return replace(self, color=move(self.color), scalar_opacity=move(self.scalar_opacity),
-                       gradient_opacity=grad, value_range=(t0, t1))
+                       gradient_opacity=grad, value_range=(t0, t1),
+                       metadata=dict(self.metadata))
 
     def placed_on(self, low: float, high: float) -> "TransferFunction":
         """This function's ``value_range`` mapped onto [low, high] (e.g. a volume's percentiles)."""

@@ -1,0 +1,173 @@
+"""Transfer-function presets: VolSR's own (shipped JSON), our presets files, and Slicer's files.
+
+Our format is JSON: ``{"format": "volsr-presets", "version": 1, "presets": [entry, ...]}`` where
+each entry is :meth:`TransferFunction.to_dict`. A file holding one such entry on its own is a
+single transfer function. Names are matched case-insensitively. Every bad file gives an
+:class:`~volsr_core.errors.InputError`: one line naming the file.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Iterable, Mapping
+from functools import lru_cache
+from importlib.resources import files
+from pathlib import Path
+from typing import Any
+
+from volsr_core.errors import InputError
+from volsr_core.scene.slicer_presets import read_slicer_presets, read_vp_file
+from volsr_core.scene.transfer_function import TransferFunction
+
+FORMAT = "volsr-presets"
+VERSION = 1
+_BUILTIN = "volsr-presets.json"
+
+
+def _decode(text: str, source: str | os.PathLike) -> Any:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as err:
+        raise InputError(source, f"not valid JSON: {err.msg} at line {err.lineno} column {err.colno}") from None
+
+
+def _entry(data: Any, source: str | os.PathLike, label: str) -> TransferFunction:
+    """One TransferFunction from a to_dict() entry; ``label`` says which entry in errors."""
+    if not isinstance(data, dict):
+        raise InputError(source, f"{label} is not a JSON object")
+    try:
+        return TransferFunction.from_dict(data)
+    except (TypeError, ValueError) as err:
+        raise InputError(source, f"{label}: {err}") from None
+
+
+def _presets_from(data: Any, source: str | os.PathLike) -> dict[str, TransferFunction]:
+    """The presets of a decoded presets document, by name, in file order."""
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise InputError(source, f"not a VolSR presets file (needs \"format\": \"{FORMAT}\")")
+    if data.get("version") != VERSION:
+        raise InputError(source, f"presets version {data.get('version')!r} is not supported (only {VERSION})")
+    entries = data.get("presets")
+    if not isinstance(entries, list):
+        raise InputError(source, "\"presets\" is not a list")
+    presets: dict[str, TransferFunction] = {}
+    for index, entry in enumerate(entries):
+        tf = _entry(entry, source, f"preset #{index + 1}")
+        if not tf.name:
+            raise InputError(source, f"preset #{index + 1} has no name")
+        if tf.name.lower() in {n.lower() for n in presets}:
+            raise InputError(source, f"preset '{tf.name}' appears twice")
+        presets[tf.name] = tf
+    return presets
+
+
+def _read_text(path: str | os.PathLike) -> str:
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except IsADirectoryError:
+        raise InputError(path, "is a folder, not a file") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(path, f"cannot read as text: {getattr(err, 'strerror', None) or err}") from None
+
+
+def _pick(presets: Mapping[str, TransferFunction], name: str | None,
+          source: str | os.PathLike | None) -> TransferFunction:
+    """The preset called ``name`` (any case), or the first when ``name`` is None."""
+    if not presets:
+        raise InputError(source, "holds no presets")
+    if name is None:
+        return next(iter(presets.values()))
+    for key, tf in presets.items():
+        if key.lower() == name.lower():
+            return tf
+    raise InputError(source, f"no preset '{name}'; available: {', '.join(presets)}")
+
+
+@lru_cache(maxsize=1)
+def _builtin_text() -> str:
+    return (files("volsr_core.resources") / "presets" / _BUILTIN).read_text(encoding="utf-8")
+
+
+def _builtin() -> dict[str, TransferFunction]:
+    """VolSR's shipped presets, freshly built (callers may modify them)."""
+    return _presets_from(_decode(_builtin_text(), _BUILTIN), _BUILTIN)
+
+
+def list_presets() -> list[str]:
+    """Names of VolSR's shipped presets, in file order."""
+    return list(_builtin())
+
+
+def get_preset(name: str) -> TransferFunction:
+    """VolSR's shipped preset ``name`` (case-insensitive); InputError listing the names otherwise.
+
+    CT presets are in HU; MR presets on a normalised 0-1000 range (place them with
+    :meth:`TransferFunction.placed_on`). ``metadata`` says which.
+    """
+    return _pick(_builtin(), name, None)
+
+
+def load_presets(path: str | os.PathLike) -> dict[str, TransferFunction]:
+    """The presets of a VolSR presets JSON file, by name, in file order."""
+    return _presets_from(_decode(_read_text(path), path), path)
+
+
+def save_presets(path: str | os.PathLike, tfs: Mapping[str, TransferFunction] | Iterable[TransferFunction]) -> None:
+    """Write transfer functions as a VolSR presets file, atomically (temp file + os.replace).
+
+    A mapping's keys name the presets; an iterable uses each function's own ``name``.
+    """
+    items = tfs.items() if isinstance(tfs, Mapping) else ((tf.name, tf) for tf in tfs)
+    entries = [{**tf.to_dict(), "name": name} for name, tf in items]
+    names = [entry["name"] for entry in entries]
+    if not all(names) or len({n.lower() for n in names}) != len(names):
+        raise ValueError(f"presets need distinct (case-insensitive), non-empty names; got {names}")
+    text = json.dumps({"format": FORMAT, "version": VERSION, "presets": entries}, indent=1) + "\n"
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as out:
+            out.write(text)
+        os.chmod(tmp, 0o644)  # mkstemp makes it private; a presets file is for sharing
+        os.replace(tmp, target)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def _load_json(path: str | os.PathLike, name: str | None) -> TransferFunction:
+    data = _decode(_read_text(path), path)
+    if isinstance(data, dict) and "format" not in data:
+        tf = _entry(data, path, "transfer function")
+        if name is not None and name.lower() != tf.name.lower():
+            raise InputError(path, f"holds one transfer function, '{tf.name}', not '{name}'")
+        return tf
+    return _pick(_presets_from(data, path), name, path)
+
+
+def _load_vp(path: str | os.PathLike, name: str | None) -> TransferFunction:
+    tf = read_vp_file(path)
+    if name is not None and name.lower() != tf.name.lower():
+        raise InputError(path, f"a .vp file holds one transfer function, '{tf.name}' (its file name), not '{name}'")
+    return tf
+
+
+def load_transfer_function(path: str | os.PathLike, name: str | None = None) -> TransferFunction:
+    """One transfer function from a file: ours (JSON), Slicer's ``presets.xml`` or a Slicer ``.vp``.
+
+    ``name`` (any case) picks a preset from a file holding several; the first when None. A file
+    holding one function (a single JSON entry, a ``.vp`` named after its file) must match it.
+    The kind is told by the suffix (.json, .xml/.mrml, .vp), else by the first character.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".json", ".xml", ".mrml", ".vp"):
+        head = _read_text(path).lstrip()[:1]
+        suffix = {"{": ".json", "<": ".xml"}.get(head, ".vp")
+    if suffix == ".json":
+        return _load_json(path, name)
+    if suffix == ".vp":
+        return _load_vp(path, name)
+    return _pick(read_slicer_presets(path), name, path)
