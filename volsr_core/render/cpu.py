@@ -12,7 +12,11 @@ march_ray = build_ray_program(numba.njit(inline="always", fastmath=True, boundsc
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out):
     height, width = out.shape[0], out.shape[1]
-    for y in numba.prange(height):
+    half = (height + 1) // 2
+    for r in numba.prange(height):
+        # interleave the top and bottom halves so that each thread's share of rows (prange
+        # splits the range in contiguous chunks) samples the whole image: balanced work
+        y = r // 2 if r % 2 == 0 else half + r // 2
         for x in range(width):
             march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out)
 

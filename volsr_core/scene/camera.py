@@ -69,8 +69,11 @@ class Camera:
         self.view_angle = float(self.view_angle)
         self.parallel_scale = float(self.parallel_scale)
         self.parallel_projection = bool(self.parallel_projection)
-        right, up, _ = self.basis()
-        self.view_up = up  # orthogonalised, like vtkCamera.OrthogonalizeViewUp()
+        _, up, forward = self.basis()
+        # orthogonalised like vtkCamera.OrthogonalizeViewUp(); an up that already is orthonormal is
+        # kept bit for bit, so that from_dict(to_dict()) and replace() reproduce the camera exactly
+        if abs(float(self.view_up @ forward)) > 1e-12 or abs(float(self.view_up @ self.view_up) - 1.0) > 1e-12:
+            self.view_up = up
 
     # geometry -----------------------------------------------------------------------------
     @property
@@ -168,11 +171,13 @@ class Camera:
         return replace(self, view_up=_rotation(self.direction_of_projection, degrees) @ self.view_up)
 
     def zoom(self, factor: float) -> "Camera":
-        """Narrow the view angle (perspective) or the parallel scale by ``factor`` (>1 zooms in)."""
+        """Divide the view angle (perspective) or the parallel scale by ``factor`` (>1 zooms in).
+
+        Like vtkCamera.Zoom, the perspective case divides the angle itself, not its tangent.
+        """
         if self.parallel_projection:
             return replace(self, parallel_scale=self.parallel_scale / factor)
-        t = math.tan(math.radians(self.view_angle) / 2.0) / factor
-        return replace(self, view_angle=math.degrees(2.0 * math.atan(t)))
+        return replace(self, view_angle=self.view_angle / factor)
 
     def dolly(self, factor: float) -> "Camera":
         """Move the position towards the focal point, dividing the distance by ``factor``."""
@@ -182,9 +187,12 @@ class Camera:
     @classmethod
     def framing(cls, bounds: Bounds, direction: Sequence[float] = (0.0, 1.0, 0.0),
                 view_up: Sequence[float] = (0.0, 0.0, 1.0), view_angle: float = 30.0,
-                parallel_projection: bool = False, margin: float = 1.0) -> "Camera":
+                parallel_projection: bool = False, margin: float = 1.0, aspect: float = 1.0) -> "Camera":
         """A camera looking along ``direction`` that frames ``bounds`` (vtkRenderer.ResetCamera).
 
+        As in VTK, the bounding sphere of ``bounds`` (times ``margin``) touches the view: vertically
+        for a landscape image (``aspect`` = width / height >= 1), horizontally for a portrait one.
+        VTK also forces the view angle to 30 degrees; here ``view_angle`` is kept.
         The default is an anterior view: the camera stands on the patient's front (-y in LPS)
         looking towards +y (posterior), with superior (+z in LPS) at the top of the image.
         """
@@ -193,9 +201,12 @@ class Camera:
         radius = 0.5 * float(np.linalg.norm(b[:, 1] - b[:, 0])) * margin
         d = _vec(direction)
         d /= np.linalg.norm(d)
-        dist = radius / math.sin(math.radians(view_angle) / 2.0)
+        half_angle, scale = math.radians(view_angle) / 2.0, radius
+        if aspect < 1.0:
+            half_angle, scale = math.atan(math.tan(half_angle) * aspect), radius / aspect
+        dist = radius / math.sin(half_angle)
         cam = cls(position=center - d * dist, focal_point=center, view_up=view_up, view_angle=view_angle,
-                  parallel_projection=parallel_projection, parallel_scale=radius)
+                  parallel_projection=parallel_projection, parallel_scale=scale)
         return cam.reset_clipping_range(bounds)
 
     def reset_clipping_range(self, bounds: Bounds, slack: float = 0.01) -> "Camera":

@@ -1,0 +1,48 @@
+"""Package shape: the core imports without the extras, and imports flow down the layer list."""
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "volsr_core"
+LAYERS = ["io", "scene", "render", "temporal", "sr", "runtime", "hosts", "cli"]
+SHARED = {"errors", "atomic"}  # plain helpers every layer may use
+
+
+def layer_of(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[0] != "volsr_core" or len(parts) < 2:
+        return None
+    return parts[1]
+
+
+def test_core_imports_without_vtk_torch_or_onnxruntime():
+    code = ("import sys, volsr_core.io, volsr_core.scene, volsr_core.render, volsr_core.temporal, volsr_core.cli;"
+            "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('vtk', 'vtkmodules', 'torch', 'onnxruntime'));"
+            "print(bad); sys.exit(1 if bad else 0)")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, f"core import pulled in: {result.stdout}{result.stderr}"
+
+
+def test_imports_flow_down_the_layer_list():
+    offences = []
+    for path in PACKAGE.rglob("*.py"):
+        rel = path.relative_to(PACKAGE)
+        own = rel.parts[0] if len(rel.parts) > 1 else rel.stem
+        if own not in LAYERS:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            for name in names:
+                other = layer_of(name)
+                if other is None or other in SHARED or other == own:
+                    continue
+                if other not in LAYERS or LAYERS.index(other) > LAYERS.index(own):
+                    offences.append(f"{rel}: imports {name}")
+    assert not offences, "imports must only reach layers listed before their own:\n" + "\n".join(offences)

@@ -1,0 +1,45 @@
+"""The CUDA build of the ray program agrees with the CPU build.
+
+Without a GPU this runs in Numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, set before numba is
+imported, hence the subprocess) on a tiny image; with a GPU set VOLSR_TEST_REAL_CUDA=1 to use it.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("numba.cuda", reason="numba-cuda is not installed")
+
+SCRIPT = textwrap.dedent("""
+    import sys
+    import numpy as np
+    sys.path.insert(0, {tests!r})
+    from test_render_reference import oblique_volume, shaded_tf
+    from volsr_core.render import RayCaster
+    from volsr_core.scene import Camera
+
+    volume = oblique_volume()
+    camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1)).zoom(2.0)
+    kwargs = dict(jitter=(0.2, -0.1), previous_camera=camera.azimuth(3))
+    cpu = RayCaster(volume, shaded_tf(), block_size=4).render(camera, 8, 6, **kwargs)
+    gpu = RayCaster(volume, shaded_tf(), block_size=4, device="cuda").render(camera, 8, 6, **kwargs)
+    assert cpu.alpha.max() > 0.5, "scene must be visible"
+    err = np.abs(cpu.data - gpu.data)
+    print("max abs difference", err.max())
+    assert err.max() < 1e-4, err.max()
+""")
+
+
+def test_cuda_path_matches_cpu_path():
+    env = dict(os.environ)
+    if os.environ.get("VOLSR_TEST_REAL_CUDA") != "1":
+        env["NUMBA_ENABLE_CUDASIM"] = "1"
+    tests = str(Path(__file__).resolve().parent)
+    result = subprocess.run([sys.executable, "-c", SCRIPT.format(tests=tests)], env=env,
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout + result.stderr
