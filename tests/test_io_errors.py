@@ -2,7 +2,9 @@
 names the offending file or folder, and says what is wrong."""
 from __future__ import annotations
 
+import contextlib
 import gzip
+import io
 import shutil
 import sys
 from pathlib import Path
@@ -14,13 +16,15 @@ import SimpleITK as sitk
 from pydicom.uid import generate_uid
 
 from test_io import as_new_series, copy_series, files_by_position, write_ct_series
+from volsr_core.cli import main as volsr_main
 from volsr_core.errors import InputError
 from volsr_core.io import list_dicom_series, read_volume
 
 
 def expect_error(path: Path, *phrases: str, name: str | None = None, **kwargs) -> str:
     """read_volume(path) must raise a one-line InputError naming ``name`` (default: path's name)
-    and containing every phrase (case-insensitive); returns the message."""
+    and containing every phrase (case-insensitive); ``volsr info`` on it must print that line
+    and exit with 2. Returns the message."""
     with pytest.raises(InputError) as caught:
         read_volume(path, **kwargs)
     message = str(caught.value)
@@ -28,6 +32,13 @@ def expect_error(path: Path, *phrases: str, name: str | None = None, **kwargs) -
     assert (name or path.name) in message
     for phrase in phrases:
         assert phrase.lower() in message.lower(), message
+    argv = ["info", str(path)] + (["--series", kwargs["series_uid"]] if kwargs.get("series_uid") else []) \
+        + (["--resample"] if kwargs.get("resample") else [])
+    stderr, stdout = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(stdout):
+        code = volsr_main(argv)
+    assert code == 2 and stdout.getvalue() == ""
+    assert stderr.getvalue() == f"volsr: error: {message}\n"
     return message
 
 

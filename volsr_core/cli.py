@@ -1,0 +1,238 @@
+"""The ``volsr`` command: one entry point, a subcommand per job.
+
+Bad input prints one line ``volsr: error: <file>: <problem>`` and exits with status 2.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from volsr_core.errors import InputError, VolSRError
+
+
+# -- shared argument handling ---------------------------------------------------------------------
+def parse_size(text: str) -> tuple[int, int]:
+    """'512' -> (512, 512); '640x480' -> (640, 480) as (width, height)."""
+    try:
+        parts = [int(p) for p in text.lower().split("x")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must be W or WxH in pixels, got {text!r}") from None
+    if len(parts) == 1:
+        parts *= 2
+    if len(parts) != 2 or min(parts) < 1:
+        raise argparse.ArgumentTypeError(f"size must be W or WxH with positive integers, got {text!r}")
+    return parts[0], parts[1]
+
+
+def parse_range(text: str) -> tuple[float, float] | str:
+    """'auto', 'none' or 'LO,HI'."""
+    if text in ("auto", "none"):
+        return text
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"range must be auto, none or LO,HI, got {text!r}") from None
+    if not hi > lo:
+        raise argparse.ArgumentTypeError(f"range needs LO < HI, got {text!r}")
+    return lo, hi
+
+
+def add_volume_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("volume", nargs="?", help="DICOM folder (or a file in it), .nrrd, .nii[.gz], .mha/.mhd or .vti; "
+                   "omitted: the built-in synthetic CT phantom")
+    p.add_argument("--series", metavar="UID", help="DICOM SeriesInstanceUID to load (default: the series with most slices)")
+    p.add_argument("--resample", action="store_true",
+                   help="resample DICOM slices with missing or uneven gaps to uniform spacing instead of refusing")
+
+
+def load_volume_argument(args: argparse.Namespace):
+    """The Volume the arguments name, or the phantom when none is given."""
+    from volsr_core.io import make_phantom
+    from volsr_core.scene import Volume
+
+    if args.volume is None:
+        return Volume.from_record(make_phantom())
+    return Volume.load(args.volume, series_uid=args.series, resample=args.resample)
+
+
+# -- volsr info -----------------------------------------------------------------------------------
+def cmd_info(args: argparse.Namespace) -> int:
+    volume = load_volume_argument(args)
+    nx, ny, nz = volume.shape_xyz
+    lo, hi = volume.value_range
+    p_lo, p_hi = volume.percentiles()
+    lines = [
+        f"source      {volume.source}",
+        f"modality    {volume.modality}" + (f" ({volume.units})" if volume.units else ""),
+        f"size        {nx} x {ny} x {nz} voxels (x, y, z)",
+        f"spacing     {volume.spacing[0]:.4g} x {volume.spacing[1]:.4g} x {volume.spacing[2]:.4g} mm",
+        f"origin      ({volume.origin[0]:.4g}, {volume.origin[1]:.4g}, {volume.origin[2]:.4g}) mm, LPS",
+        "direction   " + "  ".join("(" + ", ".join(f"{v:.4g}" for v in col) + ")" for col in volume.direction.T),
+        f"extent      {np.ptp(volume.corners, axis=0).round(2).tolist()} mm",
+        f"values      {lo:.6g} .. {hi:.6g} (0.5-99.5 percentiles {p_lo:.6g} .. {p_hi:.6g})",
+        f"memory      {volume.array.nbytes / 2**20:.1f} MiB as float32",
+    ]
+    lines += [f"note        {note}" for note in volume.notes]
+    for s in volume.series:  # DICOM: every series found, largest first; '*' marks the one loaded
+        taken = "*" if volume.notes and s.series_uid in volume.notes[0] else " "
+        lines.append(f"series {taken}   {s.series_uid}  {s.modality}  {s.n_files} files  {s.columns}x{s.rows}"
+                     + (f"  {s.description}" if s.description else ""))
+    print("\n".join(lines))
+    return 0
+
+
+# -- volsr render ---------------------------------------------------------------------------------
+def choose_transfer_function(volume, preset: str | None, tf_file: str | None, tf_name: str | None,
+                             value_range) -> "TransferFunction":
+    """The transfer function the arguments ask for, placed on the volume's values when needed.
+
+    ``value_range``: 'none' keeps the preset's values; (lo, hi) places its design range there;
+    'auto' places it on the volume's 0.5-99.5 percentiles unless the volume is in the preset's
+    units already (HU presets on CT in HU).
+    """
+    from volsr_core.scene.presets import get_preset, load_transfer_function
+
+    if tf_file is not None:
+        tf = load_transfer_function(tf_file, name=tf_name)
+    else:
+        name = preset or ("CT-Phantom" if volume.source.startswith("phantom") else
+                          "CT-Bone" if volume.units == "HU" else "CT-Bone")
+        tf = get_preset(name)
+    if value_range == "none":
+        return tf
+    if value_range == "auto":
+        designed_for_hu = tf.metadata.get("units", "HU" if tf.value_range[0] < -500 else "") == "HU"
+        if volume.units == "HU" and designed_for_hu:
+            return tf
+        return tf.placed_on(*volume.percentiles())
+    return tf.placed_on(*value_range)
+
+
+def cameras_for(args: argparse.Namespace, volume, n_default: int = 1) -> list:
+    from volsr_core.scene import Camera
+    from volsr_core.scene.camera_paths import orbit, read_camera_path
+
+    if args.camera_path:
+        return read_camera_path(args.camera_path)
+    n = args.orbit or n_default
+    return [c.reset_clipping_range(volume.bounds) for c in orbit(Camera.framing(volume.bounds), n,
+                                                                   elevation=args.elevation)]
+
+
+def write_png(path: Path, rgb8: np.ndarray) -> None:
+    from PIL import Image
+
+    from volsr_core.atomic import atomic_write
+
+    with atomic_write(path) as fh:
+        Image.fromarray(rgb8).save(fh, format="PNG")
+
+
+def output_paths(out: str, n_frames: int) -> tuple[list[Path], Path]:
+    """PNG paths for the frames and the folder they go in; a single frame may be named '*.png'."""
+    target = Path(out)
+    if target.suffix.lower() == ".png":
+        if n_frames != 1:
+            raise InputError(out, f"names one PNG but {n_frames} frames will be rendered; give a folder")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        return [target], target.parent
+    if target.exists() and not target.is_dir():
+        raise InputError(out, "exists and is not a folder")
+    target.mkdir(parents=True, exist_ok=True)
+    return [target / f"frame_{i:04d}.png" for i in range(n_frames)], target
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from volsr_core.render import RayCaster
+    from volsr_core.temporal import render_supersampled
+
+    volume = load_volume_argument(args)
+    tf = choose_transfer_function(volume, args.preset, args.tf, args.tf_name, args.range)
+    cameras = cameras_for(args, volume)
+    width, height = args.size
+    pngs, _ = output_paths(args.out, len(cameras))
+    caster = RayCaster(volume, tf, sample_distance=args.sample_distance, device=args.device,
+                       background=args.background)
+    previous = None
+    started = time.perf_counter()
+    for camera, png in zip(tqdm(cameras, desc="render", unit="frame", disable=len(cameras) < 2), pngs):
+        if args.spp > 1:
+            color = render_supersampled(caster, camera, width, height, spp=args.spp)
+            rgb8 = np.clip(np.rint(color * 255), 0, 255).astype(np.uint8)
+        if args.spp == 1 or args.features:
+            frame = caster.render(camera, width, height, previous_camera=previous)
+            if args.spp == 1:
+                rgb8 = frame.to_uint8()
+            if args.features:
+                frame.save_npz(png.with_suffix(".npz"))
+        write_png(png, rgb8)
+        previous = camera
+    elapsed = time.perf_counter() - started
+    print(f"wrote {len(pngs)} frame(s) of {width}x{height} to {pngs[0] if len(pngs) == 1 else pngs[0].parent} "
+          f"({1000 * elapsed / len(pngs):.0f} ms per frame, {args.spp} spp, transfer function {tf.name or 'from file'})")
+    return 0
+
+
+# -- entry point ----------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="volsr", description="Learned super-resolution for medical volume rendering.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    info = sub.add_parser("info", help="geometry, value range and DICOM series of a volume")
+    add_volume_arguments(info)
+    info.set_defaults(run=cmd_info)
+
+    render = sub.add_parser("render", help="ray-cast a volume to PNG frames (and .npz feature buffers)")
+    add_volume_arguments(render)
+    tf = render.add_mutually_exclusive_group()
+    tf.add_argument("--preset", help="shipped preset name (see resources/presets); default CT-Phantom for the "
+                    "phantom, CT-Bone otherwise")
+    tf.add_argument("--tf", metavar="FILE", help="transfer function file: VolSR JSON, Slicer presets.xml or .vp")
+    render.add_argument("--tf-name", metavar="NAME", help="which entry of a presets file --tf names")
+    render.add_argument("--range", type=parse_range, default="auto", metavar="auto|none|LO,HI",
+                        help="place the transfer function's design range on LO,HI; auto: on the volume's "
+                        "0.5-99.5 percentiles unless the volume is in the preset's units (HU) [auto]")
+    render.add_argument("--size", type=parse_size, default=(512, 512), metavar="W[xH]", help="image size [512]")
+    path = render.add_mutually_exclusive_group()
+    path.add_argument("--camera-path", metavar="FILE", help="camera path JSON (vtkCamera terms)")
+    path.add_argument("--orbit", type=int, metavar="N", help="N frames orbiting the volume (azimuth, 360 degrees)")
+    render.add_argument("--elevation", type=float, default=0.0, metavar="DEG",
+                        help="elevation of the default anterior view, degrees [0]")
+    render.add_argument("--spp", type=int, default=1, metavar="N", help="jittered samples per pixel (Halton 2,3) [1]")
+    render.add_argument("--sample-distance", type=float, metavar="MM", help="ray step, mm [half the smallest spacing]")
+    render.add_argument("--background", type=lambda s: tuple(float(v) for v in s.split(",")), default=(0.0, 0.0, 0.0),
+                        metavar="R,G,B", help="background colour in [0, 1] [0,0,0]")
+    render.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="where rays are cast [cpu]")
+    render.add_argument("--out", required=True, metavar="DIR_OR_PNG", help="folder for frame_NNNN.png, or one .png")
+    render.add_argument("--features", action="store_true",
+                        help="also write frame_NNNN.npz with colour, alpha, depth, max-alpha RGBA, position, motion")
+    render.set_defaults(run=cmd_render)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "spp", 1) < 1:
+        parser.error("--spp must be at least 1")
+    if getattr(args, "orbit", None) is not None and args.orbit < 1:
+        parser.error("--orbit must be at least 1")
+    try:
+        return args.run(args)
+    except VolSRError as err:
+        print(f"volsr: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("volsr: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
