@@ -8,7 +8,11 @@ allocations, traced) while building its tables and rendering, as a multiple of t
 float32 size.
 
     python benchmarks/bench_renderer.py [--data ../shared/data/volumes] [--sizes 128 512]
-                                        [--repeats 7] [--out benchmarks/results/renderer.json]
+                                        [--repeats 5] [--diagonal-steps N]
+                                        [--out benchmarks/results/renderer.json]
+
+The sample distance is VolSR's default, half the smallest spacing, unless ``--diagonal-steps N``
+sets it to the box diagonal / N (the prototypes' "256 steps over the diagonal").
 """
 from __future__ import annotations
 
@@ -43,21 +47,25 @@ def views(volume: Volume) -> list[Camera]:
     return [start.azimuth(a).elevation(e).reset_clipping_range(volume.bounds) for a, e in VIEWS]
 
 
-def peak_memory_ratio(volume: Volume, tf, camera: Camera, size: int) -> float:
+def peak_memory_ratio(volume: Volume, tf, camera: Camera, size: int, step: float) -> float:
     tracemalloc.start()
-    caster = RayCaster(volume, tf)
+    caster = RayCaster(volume, tf, sample_distance=step)
     caster.render(camera, size, size, previous_camera=camera.azimuth(1))
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     return (volume.array.nbytes + peak) / volume.array.nbytes
 
 
-def bench_scene(path: Path, preset: str, value_range, sizes, repeats: int) -> list[dict]:
+def bench_scene(path: Path, preset: str, value_range, sizes, repeats: int,
+                diagonal_steps: int | None) -> list[dict]:
     from volsr_core.hosts.vtk_scene import VtkVolumeRenderer
 
     volume = Volume.load(path)
     tf = get_preset(preset).placed_on(*value_range)
-    caster = RayCaster(volume, tf)
+    step = None
+    if diagonal_steps:
+        step = float(np.linalg.norm(np.ptp(volume.corners, axis=0))) / diagonal_steps
+    caster = RayCaster(volume, tf, sample_distance=step)
     rows = []
     for size in sizes:
         vtk = VtkVolumeRenderer(volume, tf, size, size, mapper="fixed_point", sample_distance=caster.sample_distance)
@@ -78,7 +86,8 @@ def bench_scene(path: Path, preset: str, value_range, sizes, repeats: int) -> li
         rows.append({"volume": path.name, "preset": preset, "size": size, "sample_distance_mm": caster.sample_distance,
                      "volsr_ms": round(ours, 1), "vtk_fixed_point_ms": round(theirs, 1),
                      "ratio": round(ours / theirs, 2),
-                     "peak_memory_x_volume": round(peak_memory_ratio(volume, tf, views(volume)[0], size), 2)})
+                     "peak_memory_x_volume": round(peak_memory_ratio(volume, tf, views(volume)[0], size,
+                                                                         caster.sample_distance), 2)})
         print(f"{path.name:14s} {size:4d}²  VolSR {ours:7.1f} ms   VTK {theirs:7.1f} ms   ratio {ours / theirs:4.2f}",
               flush=True)
     return rows
@@ -89,11 +98,12 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data" / "volumes")
     parser.add_argument("--sizes", type=int, nargs="+", default=[128, 512])
     parser.add_argument("--repeats", type=int, default=5, help="timed renders per camera view and renderer")
+    parser.add_argument("--diagonal-steps", type=int, help="sample distance = box diagonal / N [half the spacing]")
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "renderer.json")
     args = parser.parse_args()
     rows = []
     for name, preset, value_range in SCENES:
-        rows += bench_scene(args.data / name, preset, value_range, args.sizes, args.repeats)
+        rows += bench_scene(args.data / name, preset, value_range, args.sizes, args.repeats, args.diagonal_steps)
     print("\n| volume | size | VolSR ms (all features) | VTK fixed-point ms | ratio | peak memory / volume |")
     print("|---|---|---|---|---|---|")
     for r in rows:
@@ -101,7 +111,8 @@ def main() -> None:
               f"| {r['peak_memory_x_volume']}x |")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(args.out, "w") as fh:
-        json.dump({"benchmark": "renderer", "views": VIEWS, "rows": rows}, fh, indent=2)
+        json.dump({"benchmark": "renderer", "views": VIEWS, "diagonal_steps": args.diagonal_steps, "rows": rows},
+                  fh, indent=2)
     print(f"\nwrote {args.out}")
 
 

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from functools import lru_cache
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
+from volsr_core.atomic import atomic_write
 from volsr_core.errors import InputError
 from volsr_core.scene.slicer_presets import read_slicer_presets, read_vp_file
 from volsr_core.scene.transfer_function import TransferFunction
@@ -126,16 +126,8 @@ def save_presets(path: str | os.PathLike, tfs: Mapping[str, TransferFunction] | 
     if not all(names) or len({n.lower() for n in names}) != len(names):
         raise ValueError(f"presets need distinct (case-insensitive), non-empty names; got {names}")
     text = json.dumps({"format": FORMAT, "version": VERSION, "presets": entries}, indent=1) + "\n"
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as out:
-            out.write(text)
-        os.chmod(tmp, 0o644)  # mkstemp makes it private; a presets file is for sharing
-        os.replace(tmp, target)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    with atomic_write(path, "w", encoding="utf-8") as out:
+        out.write(text)
 
 
 def _load_json(path: str | os.PathLike, name: str | None) -> TransferFunction:
