@@ -10,6 +10,8 @@ pytestmark = pytest.mark.vtk
 vtk_core = pytest.importorskip("vtkmodules.vtkRenderingCore")
 vtk_gl = pytest.importorskip("vtkmodules.vtkRenderingOpenGL2")
 
+from volsr_core.hosts.vtk_scene import apply_camera  # noqa: E402
+
 BOUNDS = (-50.0, 70.0, -30.0, 40.0, -100.0, 90.0)
 
 CAMERAS = {
@@ -29,13 +31,7 @@ SIZES = ((300, 200), (200, 300), (256, 256))
 def to_vtk(camera: Camera):
     """A vtkCamera set up like ``camera``."""
     c = vtk_core.vtkCamera()
-    c.SetPosition(*camera.position)
-    c.SetFocalPoint(*camera.focal_point)
-    c.SetViewUp(*camera.view_up)
-    c.SetViewAngle(camera.view_angle)
-    c.SetParallelProjection(camera.parallel_projection)
-    c.SetParallelScale(camera.parallel_scale)
-    c.SetClippingRange(*camera.clipping_range)
+    apply_camera(c, camera)
     return c
 
 
