@@ -10,7 +10,7 @@ export VTK_DEFAULT_OPENGL_WINDOW ?= vtkEGLRenderWindow
 $(STAMP):
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,vtk]"
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,vtk,torch]"
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
@@ -30,5 +30,8 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_renderer.py
 
+## numba caches kernels on disk keyed by the file that defines the kernel: after editing a file a
+## kernel inlines from (render/stages.py, temporal/color.py), clear them
 clean:
 	rm -rf out .pytest_cache
+	find volsr_core -name '*.nbi' -o -name '*.nbc' | xargs -r rm -f

@@ -10,7 +10,7 @@ setup(
     python_requires=">=3.10",
     packages=find_packages(include=["volsr_core", "volsr_core.*"]) + ["volsr_core.resources"],
     package_dir={"volsr_core.resources": "resources"},
-    package_data={"volsr_core.resources": ["presets/*.json", "models/*"]},
+    package_data={"volsr_core.resources": ["presets/*.json", "schemas/*.json", "models/*"]},
     install_requires=[
         "numpy>=1.24",
         "numba>=0.59",
@@ -19,6 +19,8 @@ setup(
         "tqdm>=4.60",
         "pyyaml>=6.0",
         "pillow>=9.0",
+        "h5py>=3.8",
+        "jsonschema>=4.0",
     ],
     extras_require={
         # Hosts bring their own VTK (Slicer, ParaView): never a hard dependency.

@@ -87,3 +87,17 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path):
         lines = result.stderr.strip().splitlines()
         assert len(lines) >= 1 and phrase in lines[-1] and "Traceback" not in result.stderr, result.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+def test_render_with_taa_accumulates_over_the_path(tmp_path, phantom):
+    from volsr_core.temporal import TemporalAntiAliasing, halton_jitter
+
+    assert main(["render", "--orbit", "4", "--size", "32", "--taa", "--out", str(tmp_path / "taa")]) == 0
+    cameras = [c.reset_clipping_range(phantom.bounds) for c in orbit(Camera.framing(phantom.bounds), 4)]
+    caster, taa, previous = RayCaster(phantom, get_preset("CT-Phantom")), TemporalAntiAliasing(), None
+    for i, camera in enumerate(cameras):
+        frame = caster.render(camera, 32, 32, jitter=halton_jitter(i, 16), previous_camera=previous, seed=i)
+        expected, previous = taa(frame.color, frame.motion), camera
+    image = np.asarray(Image.open(tmp_path / "taa" / "frame_0003.png")).astype(np.float32) / 255
+    assert np.abs(image - expected).max() <= 0.5 / 255 + 1e-6
+    assert main(["render", "--taa", "--spp", "4", "--out", str(tmp_path / "x.png")]) == 2

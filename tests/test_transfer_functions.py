@@ -391,3 +391,20 @@ def test_non_linear_vtk_segments_are_refused(vtk_property):
     prop.GetScalarOpacity(0).AddPoint(100.0, 0.5, 0.3, 0.0)  # midpoint 0.3
     with pytest.raises(ValueError, match="midpoint"):
         vtk_property.from_vtk_volume_property(prop)
+
+
+def test_place_on_volume_keeps_hu_presets_on_hu_volumes_and_moves_them_otherwise():
+    import numpy as np
+
+    from volsr_core.scene import Volume
+    from volsr_core.scene.presets import place_on_volume
+
+    tf = get_preset("CT-Bone")
+    ct = Volume(np.linspace(-1000, 2000, 4 * 5 * 6, dtype=np.float32).reshape(4, 5, 6), modality="CT", units="HU")
+    rescaled = Volume(np.linspace(0, 255, 4 * 5 * 6, dtype=np.float32).reshape(4, 5, 6))
+    assert place_on_volume(tf, ct).to_dict() == tf.to_dict()
+    assert place_on_volume(tf, rescaled, None).to_dict() == tf.to_dict()
+    assert place_on_volume(tf, rescaled, "none").to_dict() == tf.to_dict()
+    auto = place_on_volume(tf, rescaled)
+    assert auto.value_range == pytest.approx(rescaled.percentiles())
+    assert place_on_volume(tf, rescaled, (10.0, 200.0)).value_range == (10.0, 200.0)

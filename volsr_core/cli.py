@@ -88,29 +88,18 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 # -- volsr render ---------------------------------------------------------------------------------
 def choose_transfer_function(volume, preset: str | None, tf_file: str | None, tf_name: str | None,
-                             value_range) -> "TransferFunction":
-    """The transfer function the arguments ask for, placed on the volume's values when needed.
+                             placement) -> "TransferFunction":
+    """The transfer function the arguments ask for, placed on the volume's values (see place_on_volume).
 
-    ``value_range``: 'none' keeps the preset's values; (lo, hi) places its design range there;
-    'auto' places it on the volume's 0.5-99.5 percentiles unless the volume is in the preset's
-    units already (HU presets on CT in HU).
+    Default preset: CT-Phantom for the phantom, CT-Bone otherwise.
     """
-    from volsr_core.scene.presets import get_preset, load_transfer_function
+    from volsr_core.scene.presets import get_preset, load_transfer_function, place_on_volume
 
     if tf_file is not None:
         tf = load_transfer_function(tf_file, name=tf_name)
     else:
-        name = preset or ("CT-Phantom" if volume.source.startswith("phantom") else
-                          "CT-Bone" if volume.units == "HU" else "CT-Bone")
-        tf = get_preset(name)
-    if value_range == "none":
-        return tf
-    if value_range == "auto":
-        designed_for_hu = tf.metadata.get("units", "HU" if tf.value_range[0] < -500 else "") == "HU"
-        if volume.units == "HU" and designed_for_hu:
-            return tf
-        return tf.placed_on(*volume.percentiles())
-    return tf.placed_on(*value_range)
+        tf = get_preset(preset or ("CT-Phantom" if volume.source.startswith("phantom") else "CT-Bone"))
+    return place_on_volume(tf, volume, placement)
 
 
 def cameras_for(args: argparse.Namespace, volume, n_default: int = 1) -> list:
@@ -151,8 +140,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from volsr_core.render import RayCaster
-    from volsr_core.temporal import render_supersampled
+    from volsr_core.temporal import TemporalAntiAliasing, halton_jitter, render_supersampled
 
+    if args.taa and args.spp > 1:
+        raise InputError(None, "--taa accumulates one jittered sample per frame; it does not combine with --spp")
     volume = load_volume_argument(args)
     tf = choose_transfer_function(volume, args.preset, args.tf, args.tf_name, args.range)
     cameras = cameras_for(args, volume)
@@ -160,23 +151,49 @@ def cmd_render(args: argparse.Namespace) -> int:
     pngs, _ = output_paths(args.out, len(cameras))
     caster = RayCaster(volume, tf, sample_distance=args.sample_distance, device=args.device,
                        background=args.background)
+    taa = TemporalAntiAliasing() if args.taa else None
     previous = None
     started = time.perf_counter()
-    for camera, png in zip(tqdm(cameras, desc="render", unit="frame", disable=len(cameras) < 2), pngs):
-        if args.spp > 1:
-            color = render_supersampled(caster, camera, width, height, spp=args.spp)
-            rgb8 = np.clip(np.rint(color * 255), 0, 255).astype(np.uint8)
+    for i, (camera, png) in enumerate(zip(tqdm(cameras, desc="render", unit="frame", disable=len(cameras) < 2), pngs)):
         if args.spp == 1 or args.features:
-            frame = caster.render(camera, width, height, previous_camera=previous)
-            if args.spp == 1:
-                rgb8 = frame.to_uint8()
+            jitter = halton_jitter(i, 16) if taa else (0.0, 0.0)
+            frame = caster.render(camera, width, height, jitter=jitter, previous_camera=previous, seed=i)
             if args.features:
                 frame.save_npz(png.with_suffix(".npz"))
-        write_png(png, rgb8)
+        if args.spp > 1:
+            color = render_supersampled(caster, camera, width, height, spp=args.spp)
+        else:
+            color = taa(frame.color, frame.motion) if taa else frame.color
+        write_png(png, np.clip(np.rint(color * 255), 0, 255).astype(np.uint8))
         previous = camera
     elapsed = time.perf_counter() - started
+    mode = "TAA" if taa else f"{args.spp} spp"
     print(f"wrote {len(pngs)} frame(s) of {width}x{height} to {pngs[0] if len(pngs) == 1 else pngs[0].parent} "
-          f"({1000 * elapsed / len(pngs):.0f} ms per frame, {args.spp} spp, transfer function {tf.name or 'from file'})")
+          f"({1000 * elapsed / len(pngs):.0f} ms per frame, {mode}, transfer function {tf.name or 'from file'})")
+    return 0
+
+
+# -- volsr dataset --------------------------------------------------------------------------------
+def cmd_dataset(args: argparse.Namespace) -> int:
+    from volsr_core.temporal.dataset_config import read_config
+    from volsr_core.temporal.sequences import generate, parse_shard
+
+    shard = parse_shard(args.shard)
+    generate(read_config(args.config), args.out, shard=shard, device=args.device)
+    return 0
+
+
+# -- volsr train ----------------------------------------------------------------------------------
+def cmd_train(args: argparse.Namespace) -> int:
+    from volsr_core.sr.config import load_training_config
+    from volsr_core.sr.training import Trainer
+
+    config = load_training_config(args.config)
+    trainer = Trainer(config)
+    result = trainer.run()
+    if trainer.rank == 0:
+        print(f"trained to step {result['step']}; best validation PSNR {result['best_psnr']:.2f} dB; "
+              f"checkpoints, best.pt and log.csv in {config['out']}")
     return 0
 
 
@@ -206,14 +223,31 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--elevation", type=float, default=0.0, metavar="DEG",
                         help="elevation of the default anterior view, degrees [0]")
     render.add_argument("--spp", type=int, default=1, metavar="N", help="jittered samples per pixel (Halton 2,3) [1]")
+    render.add_argument("--taa", action="store_true",
+                        help="temporal anti-aliasing over the frames: one Halton-jittered ray per pixel and frame, "
+                        "history reprojected with the motion vectors and clamped to the 3x3 neighbourhood")
     render.add_argument("--sample-distance", type=float, metavar="MM", help="ray step, mm [half the smallest spacing]")
     render.add_argument("--background", type=lambda s: tuple(float(v) for v in s.split(",")), default=(0.0, 0.0, 0.0),
                         metavar="R,G,B", help="background colour in [0, 1] [0,0,0]")
     render.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="where rays are cast [cpu]")
     render.add_argument("--out", required=True, metavar="DIR_OR_PNG", help="folder for frame_NNNN.png, or one .png")
     render.add_argument("--features", action="store_true",
-                        help="also write frame_NNNN.npz with colour, alpha, depth, max-alpha RGBA, position, motion")
+                        help="also write frame_NNNN.npz with colour, alpha, depth, max-alpha RGBA, position, motion "
+                        "(of the 1-spp pass)")
     render.set_defaults(run=cmd_render)
+
+    dataset = sub.add_parser("dataset", help="render training videos: LR feature buffers at every scale + HR "
+                             "ground truth (docs/dataset.md)")
+    dataset.add_argument("config", help="dataset config, YAML (training/configs/dataset_default.yaml)")
+    dataset.add_argument("--out", required=True, metavar="DIR", help="dataset folder; a run resumes what is there")
+    dataset.add_argument("--shard", default="0/1", metavar="i/n", help="render only the videos whose number %% n == i [0/1]")
+    dataset.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="where rays are cast [cpu]")
+    dataset.set_defaults(run=cmd_dataset)
+
+    train = sub.add_parser("train", help="train the SR network (resumes from OUT/checkpoints/last.pt); "
+                           "several processes: torchrun --nproc_per_node N -m volsr_core.cli train CONFIG")
+    train.add_argument("config", help="training config, YAML (training/configs/*.yaml)")
+    train.set_defaults(run=cmd_train)
     return parser
 
 

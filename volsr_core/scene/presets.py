@@ -19,6 +19,7 @@ from volsr_core.atomic import atomic_write
 from volsr_core.errors import InputError
 from volsr_core.scene.slicer_presets import read_slicer_presets, read_vp_file
 from volsr_core.scene.transfer_function import TransferFunction
+from volsr_core.scene.volume import Volume
 
 FORMAT = "volsr-presets"
 VERSION = 1
@@ -163,3 +164,20 @@ def load_transfer_function(path: str | os.PathLike, name: str | None = None) -> 
     if suffix == ".vp":
         return _load_vp(path, name)
     return _pick(read_slicer_presets(path), name, path)
+
+
+def place_on_volume(tf: TransferFunction, volume: Volume, placement: str | tuple[float, float] | None = "auto"
+                    ) -> TransferFunction:
+    """``tf`` with its design range placed on ``volume``'s values, as ``placement`` says.
+
+    ``None``/"none": unchanged; (lo, hi): the design range mapped onto [lo, hi]; "auto": unchanged
+    when the volume is in the preset's units already (HU presets on CT in HU), else the design
+    range mapped onto the volume's 0.5-99.5 percentiles (for rescaled CT and MR).
+    """
+    if placement is None or placement == "none":
+        return tf
+    if placement == "auto":
+        units = tf.metadata.get("units", "HU" if tf.value_range[0] < -500 else "")
+        return tf if volume.units and volume.units == units else tf.placed_on(*volume.percentiles())
+    low, high = placement
+    return tf.placed_on(low, high)

@@ -1,6 +1,8 @@
 """Sub-pixel jitter offsets: the Halton (2, 3) sequence, as TAA and FSR2 use it."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -14,6 +16,11 @@ def halton(index: int, base: int) -> float:
         result += f * (index % base)
         index //= base
     return result
+
+
+def jitter_phases(scale: int) -> int:
+    """Length of the Halton jitter cycle for an upscaling ``scale``: ceil(8 * scale**2), as FSR2 uses."""
+    return int(math.ceil(8 * scale * scale))
 
 
 def halton_jitter(frame: int, phases: int = 16) -> tuple[float, float]:

@@ -1,0 +1,79 @@
+"""The network's pieces behave as the paper describes them, for every configuration."""
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from volsr_core.sr.network import (  # noqa: E402
+    FEATURE_CHANNELS, NetworkConfig, Reweighting, SuperResolutionNet, backward_warp, upsample_motion, variant_config,
+    zero_upsample,
+)
+
+FEATURE_SETS = [("color",), ("color", "depth"), ("color", "depth", "max_rgba"), ("color", "alpha", "depth", "max_rgba")]
+
+
+def inputs(config: NetworkConfig, h: int = 8, w: int = 12, batch: int = 2):
+    g = torch.Generator().manual_seed(0)
+    frames = config.previous_frames + 1
+    lr = torch.rand(batch, frames, config.in_channels, h, w, generator=g)
+    motion = torch.randn(batch, frames, 2, h, w, generator=g)
+    jitter = torch.rand(batch, frames, 2, generator=g) - 0.5
+    return lr, motion, jitter
+
+
+@pytest.mark.parametrize("scale, previous, variant", list(itertools.product((2, 4, 8, 16), range(4), "SML")))
+def test_output_shape_for_every_scale_history_and_variant(scale, previous, variant):
+    config = variant_config(variant, scale=scale, previous_frames=previous)
+    net = SuperResolutionNet(config)
+    lr, motion, jitter = inputs(config, h=4, w=6, batch=1)
+    with torch.no_grad():
+        out = net(lr, motion, jitter)
+    assert out.shape == (1, 3, 4 * scale, 6 * scale)
+    assert torch.isfinite(out).all()
+
+
+@pytest.mark.parametrize("features", FEATURE_SETS)
+def test_output_shape_for_every_feature_set(features):
+    config = NetworkConfig(scale=4, previous_frames=2, features=features, fold=2)
+    assert config.in_channels == sum(FEATURE_CHANNELS[f] for f in features)
+    lr, motion, jitter = inputs(config)
+    assert SuperResolutionNet(config)(lr, motion, jitter).shape == (2, 3, 32, 48)
+
+
+@pytest.mark.parametrize("scale", (2, 4, 8))
+def test_zero_upsampling_puts_each_sample_where_its_ray_went(scale):
+    x = torch.arange(1, 1 + 2 * 3 * 5, dtype=torch.float32).reshape(1, 2, 3, 5)
+    for jx, jy in [(-0.5, -0.5), (0.49, -0.2), (0.1, 0.3), (-0.26, 0.49)]:
+        out = zero_upsample(x, torch.tensor([[jx, jy]]), scale)
+        ox, oy = int(scale * (0.5 + jx)), int(scale * (0.5 + jy))
+        assert torch.equal(out[:, :, oy::scale, ox::scale], x)
+        assert int((out != 0).sum()) == x.numel()  # zeros everywhere else
+
+
+def test_warping_with_zero_motion_is_the_identity_and_a_shift_moves_content():
+    x = torch.rand(1, 3, 16, 20)
+    assert torch.allclose(backward_warp(x, torch.zeros(1, 2, 16, 20)), x, atol=1e-6)
+    shift = torch.zeros(1, 2, 16, 20)
+    shift[:, 0], shift[:, 1] = 3.0, -2.0  # the point was 3 px right and 2 px up in the previous frame
+    out = backward_warp(x, shift)
+    assert torch.allclose(out[:, :, 2:, :-3], x[:, :, :-2, 3:], atol=1e-6)
+    assert torch.all(out[:, :, :, -3:] == 0) and torch.all(out[:, :, :2] == 0)  # off screen
+
+
+def test_motion_upsampling_scales_the_vectors():
+    mv = torch.ones(1, 2, 4, 4) * torch.tensor([1.5, -0.5]).view(1, 2, 1, 1)
+    up = upsample_motion(mv, 4)
+    assert up.shape == (1, 2, 16, 16) and torch.allclose(up[0, 0], torch.full((16, 16), 6.0))
+
+
+def test_reweighting_lies_in_zero_to_ten():
+    net = Reweighting(12, 3)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.mul_(50)  # saturate the tanh both ways
+        w = net(torch.randn(4, 12, 9, 9) * 10)
+    assert w.shape == (4, 3, 9, 9)
+    assert w.min() >= 0 and w.max() <= 10 and w.min() < 0.1 and w.max() > 9.9

@@ -1,0 +1,105 @@
+"""Training: a tiny model overfits a tiny sequence, resume is exact, torchrun (gloo, 2 CPUs) runs.
+
+The dataset: 3 phantom videos of 3 frames (one each for train, val and test), so with 2 previous
+frames the training split is one sample: the sequence the model overfits.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+torch = pytest.importorskip("torch")
+
+from volsr_core.sr.checkpoint import load_checkpoint  # noqa: E402
+from volsr_core.sr.config import load_training_config  # noqa: E402
+from volsr_core.sr.training import Trainer  # noqa: E402
+from volsr_core.temporal.dataset_config import read_config  # noqa: E402
+from volsr_core.temporal.sequences import generate  # noqa: E402
+
+DATASET = """\
+seed: 3
+hr_size: 32
+scales: [4]
+frames_per_video: 3
+previous_frames: 2
+ground_truth: {mode: supersampled, spp: 2}
+camera: {pool_size: 8, distance_range: [0.35, 0.45]}  # close up: the volume fills the 32-pixel frames
+volumes:
+  - name: phantom
+    path: phantom
+    phantom_shape: [40, 40, 40]
+    transfer_function: {preset: CT-Phantom}
+    videos: 3
+"""
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("data")
+    (folder / "tiny.yaml").write_text(DATASET)
+    generate(read_config(folder / "tiny.yaml"), folder / "set", log=lambda text: None, progress=False)
+    return folder / "set"
+
+
+def write_config(folder: Path, dataset: Path, **train) -> Path:
+    config = {
+        "seed": 1, "out": str(folder / "run"),
+        "data": {"root": str(dataset), "scale": 4, "previous_frames": 2, "crop": 32},
+        "model": {"variant": "S", "widths": [8, 12]},
+        "optim": {"lr": 3e-3, "warmup_steps": 5},
+        "train": {"steps": 8, "batch_size": 2, "checkpoint_every": 4, **train},
+    }
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "train.yaml"
+    path.write_text(yaml.safe_dump(config))
+    return path
+
+
+def losses(run: Path) -> list[float]:
+    with (run / "log.csv").open() as fh:
+        return [float(r["loss"]) for r in csv.DictReader(fh)]
+
+
+def test_a_tiny_model_overfits_a_tiny_sequence(dataset, tmp_path):
+    path = write_config(tmp_path, dataset, steps=150, checkpoint_every=150, validate_every=150)
+    config = load_training_config(path)
+    config["data"]["augment"] = False
+    config["model"]["widths"] = [16, 24]
+    config["optim"].update(weight_decay=0.0, warmup_steps=1, min_lr_ratio=1.0)
+    Trainer(config, progress=False).run()
+    loss = losses(tmp_path / "run")
+    first, last = sum(loss[:5]) / 5, sum(loss[-5:]) / 5
+    print(f"loss {first:.4f} -> {last:.4f}")
+    assert last <= first / 10
+
+
+def test_resume_gives_the_weights_of_an_uninterrupted_run(dataset, tmp_path):
+    straight = load_training_config(write_config(tmp_path / "a", dataset))
+    Trainer(straight, progress=False).run()
+    interrupted = load_training_config(write_config(tmp_path / "b", dataset))
+    Trainer(interrupted, progress=False).run(until=4)
+    assert load_checkpoint(tmp_path / "b" / "run" / "checkpoints" / "last.pt", trusted=True)["step"] == 4
+    Trainer(interrupted, progress=False).run()  # a new process would do the same: resumes from last.pt
+    a = load_checkpoint(tmp_path / "a" / "run" / "checkpoints" / "last.pt", trusted=True)["model"]
+    b = load_checkpoint(tmp_path / "b" / "run" / "checkpoints" / "last.pt", trusted=True)["model"]
+    for name in a:
+        assert torch.equal(a[name], b[name]), name
+    assert losses(tmp_path / "a" / "run") == losses(tmp_path / "b" / "run")
+
+
+def test_torchrun_two_cpu_processes(dataset, tmp_path):
+    config = write_config(tmp_path, dataset, steps=4, checkpoint_every=2)
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    result = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
+                             "-m", "volsr_core.cli", "train", str(config)], capture_output=True, text=True,
+                            env=env, timeout=300)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    state = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt", trusted=True)
+    assert state["step"] == 4
+    assert len(losses(tmp_path / "run")) == 4

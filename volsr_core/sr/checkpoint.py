@@ -1,0 +1,82 @@
+"""Checkpoints and model files: written atomically, read with ``torch.load(weights_only=True)``.
+
+A model file holds ``{"format": "volsr-model", "version": 1, "network": NetworkConfig dict,
+"state_dict": ..., **extra}``; a training checkpoint holds the whole training state (see
+:meth:`volsr_core.sr.training.Trainer.state`). Both load without unpickling arbitrary objects.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from volsr_core.atomic import atomic_write
+from volsr_core.errors import InputError
+
+MODEL_FORMAT = "volsr-model"
+
+
+def _plain(value: Any) -> Any:
+    """Numpy arrays and RNG tuples -> tensors/lists that ``weights_only`` loading accepts."""
+    if isinstance(value, np.ndarray):
+        return torch.from_numpy(value.copy())
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (tuple, list)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def save_checkpoint(path: str | os.PathLike, model: torch.nn.Module | None = None,
+                    state: dict[str, Any] | None = None, extra: dict[str, Any] | None = None) -> None:
+    """Write a model file (``model``: weights and network config) or a training ``state``, atomically."""
+    if (model is None) == (state is None):
+        raise ValueError("pass exactly one of model or state")
+    if model is not None:
+        payload = {"format": MODEL_FORMAT, "version": 1, "network": model.config.to_dict(),
+                   "state_dict": model.state_dict(), **(extra or {})}
+    else:
+        payload = _plain(state)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(path) as fh:
+        torch.save(payload, fh)
+
+
+def load_checkpoint(path: str | os.PathLike, trusted: bool = False) -> dict[str, Any]:
+    """Read a model file or training checkpoint; a corrupt or foreign file is a one-line InputError.
+
+    ``trusted`` skips the model-format check (training checkpoints). RNG states come back as
+    numpy/python objects ready for ``np.random.set_state`` / ``random.setstate``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "no such model file")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # torch raises many types for foreign or damaged files
+        raise InputError(path, f"not a readable PyTorch checkpoint ({type(err).__name__}: "
+                         f"{' '.join(str(err).split())[:160]})") from None
+    if not isinstance(payload, dict):
+        raise InputError(path, "not a VolSR model or checkpoint (no mapping inside)")
+    if not trusted and payload.get("format") != MODEL_FORMAT:
+        raise InputError(path, f"not a VolSR model file (format {payload.get('format')!r})")
+    rng = payload.get("rng")
+    if rng:
+        numpy_state = rng["numpy"]
+        rng["numpy"] = (numpy_state[0], numpy_state[1].numpy(), *numpy_state[2:])
+        python_state = rng["python"]
+        rng["python"] = (python_state[0], tuple(python_state[1]), python_state[2])
+    return payload
+
+
+def sha256(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

@@ -1,0 +1,221 @@
+"""The super-resolution network, structured as the seed paper describes it (Devkota & Pattanaik).
+
+Per frame (current t and N previous frames t-1..t-N, all at low resolution):
+
+1. **feature extraction**: a residual block (3x3 conv 32 + ReLU, 3x3 conv to 8; a 1x1 conv to 8
+   on the skip path; add; ReLU), its 8 channels concatenated with the frame's inputs;
+2. **zero-upsampling** to the target resolution: each low-resolution sample is placed on the
+   high-resolution pixel where it was taken (its frame's jitter), zeros elsewhere;
+3. **backward warping** of every previous frame's upsampled features to the current frame with
+   the motion vectors (bilinearly upsampled, times the scale), chained for t-2, t-3;
+4. **reweighting**: 3 conv layers on the RGB-D of all frames, one output channel per previous
+   frame, tanh scaled to [0, 10]; each channel multiplies all channels of one previous frame;
+5. **reconstruction**: a U-Net (after Hofmann et al.: conv + LeakyReLU(0.1) + max-pool
+   encoders, nearest-upsampling decoders with concatenated skips) producing RGB.
+
+Steps 4-5 run on the high-resolution stack *folded* by ``fold`` (pixel unshuffle): ``fold = 1``
+is the paper's network at full resolution (variant L); ``fold = scale`` (variant S) runs every
+convolution at the low resolution with the sub-pixel positions kept as channels, and unfolds
+the output with a pixel shuffle. The output adds the bilinearly upscaled current colour
+(residual learning), clamped to [0, 1] only by the loss's targets, not in the graph.
+
+Tensors: ``lr`` (B, N+1, C, h, w), index 0 the current frame; ``motion`` (B, N+1, 2, h, w) each
+frame's vectors to its own previous frame in LR pixels (docs/conventions.md); ``jitter``
+(B, N+1, 2) in LR pixels, +y down. Output (B, 3, h*scale, w*scale).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+FEATURE_CHANNELS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4}
+SCALES = (2, 4, 8, 16)
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Everything that fixes a network's shape; saved with its weights."""
+
+    scale: int = 4
+    previous_frames: int = 2
+    features: tuple[str, ...] = ("color", "depth", "max_rgba")
+    fold: int = 4               # pixel-unshuffle factor for reweighting + U-Net (1 = full resolution)
+    widths: tuple[int, ...] = (32, 48, 64)  # U-Net channels per level, finest first
+    reweight_width: int = 32
+    feature_width: int = 32     # the residual block's hidden channels (paper: 32)
+
+    def __post_init__(self) -> None:
+        if self.scale not in SCALES:
+            raise ValueError(f"scale must be one of {SCALES}, got {self.scale}")
+        if not 0 <= self.previous_frames <= 3:
+            raise ValueError("previous_frames must be 0..3")
+        bad = [f for f in self.features if f not in FEATURE_CHANNELS]
+        if bad or "color" not in self.features:
+            raise ValueError(f"features must include 'color' and come from {tuple(FEATURE_CHANNELS)}, got {self.features}")
+        if self.fold < 1 or self.scale % self.fold:
+            raise ValueError(f"fold must divide the scale ({self.scale}), got {self.fold}")
+        object.__setattr__(self, "features", tuple(self.features))
+        object.__setattr__(self, "widths", tuple(self.widths))
+
+    @property
+    def in_channels(self) -> int:
+        return sum(FEATURE_CHANNELS[f] for f in self.features)
+
+    @property
+    def rgbd_channels(self) -> list[int]:
+        """Indices of colour (and depth, when present) in a frame's input channels."""
+        idx, offset = [], 0
+        for f in self.features:
+            if f in ("color", "depth"):
+                idx += list(range(offset, offset + FEATURE_CHANNELS[f]))
+            offset += FEATURE_CHANNELS[f]
+        return idx
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def variant_config(variant: str, scale: int = 4, previous_frames: int = 2,
+                   features: tuple[str, ...] = ("color", "depth", "max_rgba")) -> NetworkConfig:
+    """The sized variants: S folds by the scale (all convolutions at LR), M by scale/2, L by 1."""
+    variant = variant.upper()
+    if variant == "S":
+        return NetworkConfig(scale, previous_frames, features, fold=scale, widths=(32, 48, 64))
+    if variant == "M":
+        return NetworkConfig(scale, previous_frames, features, fold=max(scale // 2, 1), widths=(32, 48, 64))
+    if variant == "L":
+        return NetworkConfig(scale, previous_frames, features, fold=max(scale // 4, 1), widths=(32, 64, 96))
+    raise ValueError(f"variant must be S, M or L, got {variant!r}")
+
+
+class FeatureBlock(nn.Module):
+    """The paper's per-frame residual block; returns the inputs with 8 learned channels appended."""
+
+    def __init__(self, in_channels: int, hidden: int = 32, out: int = 8):
+        super().__init__()
+        self.conv1 = nn.Conv2d(in_channels, hidden, 3, padding=1)
+        self.conv2 = nn.Conv2d(hidden, out, 3, padding=1)
+        self.skip = nn.Conv2d(in_channels, out, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = self.conv2(F.relu(self.conv1(x)))
+        return torch.cat([x, F.relu(y + self.skip(x))], dim=1)
+
+
+def zero_upsample(x: torch.Tensor, jitter: torch.Tensor, scale: int) -> torch.Tensor:
+    """(B, C, h, w) -> (B, C, h*s, w*s): each sample on the HR pixel where its ray went, zeros elsewhere.
+
+    LR pixel (i, j) rendered with jitter (jx, jy) sampled LR position (i + 0.5 + jx, j + 0.5 + jy),
+    i.e. HR pixel (s*i + ox, s*j + oy) with o = floor(s * (0.5 + jitter)), clamped to [0, s-1].
+    """
+    b, c, h, w = x.shape
+    offset = torch.clamp(torch.floor(scale * (0.5 + jitter)), 0, scale - 1)  # (B, 2): ox, oy
+    slot = offset[:, 1] * scale + offset[:, 0]                                  # (B,)
+    slots = torch.arange(scale * scale, device=x.device, dtype=x.dtype)
+    onehot = (slots[None, :] == slot[:, None]).to(x.dtype)                     # (B, s*s)
+    spread = x.unsqueeze(2) * onehot[:, None, :, None, None]                   # (B, C, s*s, h, w)
+    return F.pixel_shuffle(spread.reshape(b, c * scale * scale, h, w), scale)
+
+
+def upsample_motion(motion: torch.Tensor, scale: int) -> torch.Tensor:
+    """LR motion vectors (B, 2, h, w) in LR pixels -> HR vectors (B, 2, h*s, w*s) in HR pixels."""
+    return F.interpolate(motion, scale_factor=scale, mode="bilinear", align_corners=False) * scale
+
+
+def backward_warp(x: torch.Tensor, motion: torch.Tensor) -> torch.Tensor:
+    """``out[y, x] = x[y + dy, x + dx]`` (bilinear between pixel centres, zeros off screen)."""
+    b, _, h, w = x.shape
+    ys = torch.arange(h, device=x.device, dtype=x.dtype).view(1, h, 1)
+    xs = torch.arange(w, device=x.device, dtype=x.dtype).view(1, 1, w)
+    gx = (2.0 * (xs + 0.5 + motion[:, 0]) / w) - 1.0
+    gy = (2.0 * (ys + 0.5 + motion[:, 1]) / h) - 1.0
+    grid = torch.stack([gx, gy], dim=-1)
+    return F.grid_sample(x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+class Reweighting(nn.Module):
+    """3 convolutions on the RGB-D of all frames -> one weight in [0, 10] per previous frame."""
+
+    def __init__(self, in_channels: int, previous_frames: int, width: int = 32, first_kernel: int = 3):
+        super().__init__()
+        self.net = nn.Sequential(
+            nn.Conv2d(in_channels, width, first_kernel, padding=first_kernel // 2), nn.ReLU(),
+            nn.Conv2d(width, width, 3, padding=1), nn.ReLU(),
+            nn.Conv2d(width, previous_frames, 3, padding=1),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (torch.tanh(self.net(x)) + 1.0) * 5.0
+
+
+class UNet(nn.Module):
+    """Encoder-decoder with concatenated skips (after Hofmann et al.'s denoising autoencoder)."""
+
+    def __init__(self, in_channels: int, out_channels: int, widths: tuple[int, ...], first_kernel: int = 3):
+        super().__init__()
+        act = nn.LeakyReLU(0.1)
+        self.inp = nn.Sequential(nn.Conv2d(in_channels, widths[0], first_kernel, padding=first_kernel // 2), act,
+                                 nn.Conv2d(widths[0], widths[0], 3, padding=1), act)
+        self.down = nn.ModuleList(
+            nn.Sequential(nn.Conv2d(widths[i], widths[i + 1], 3, padding=1), act) for i in range(len(widths) - 1))
+        self.up = nn.ModuleList(
+            nn.Sequential(nn.Conv2d(widths[i + 1] + widths[i], widths[i], 3, padding=1), act,
+                          nn.Conv2d(widths[i], widths[i], 3, padding=1), act)
+            for i in reversed(range(len(widths) - 1)))
+        self.out = nn.Conv2d(widths[0], out_channels, 3, padding=1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        skips = [self.inp(x)]
+        for down in self.down:
+            skips.append(down(F.max_pool2d(skips[-1], 2)))
+        y = skips.pop()
+        for up in self.up:
+            skip = skips.pop()
+            y = F.interpolate(y, size=skip.shape[-2:], mode="nearest")
+            y = up(torch.cat([y, skip], dim=1))
+        return self.out(y)
+
+
+class SuperResolutionNet(nn.Module):
+    """The whole network; see the module docstring. ``forward(lr, motion, jitter) -> (B, 3, H, W)``."""
+
+    def __init__(self, config: NetworkConfig = field(default_factory=NetworkConfig)):
+        super().__init__()
+        self.config = config
+        c, n, s, d = config.in_channels, config.previous_frames, config.scale, config.fold
+        self.features = FeatureBlock(c, config.feature_width)
+        frame_channels = c + 8
+        self.rgbd = config.rgbd_channels
+        # folded stacks hold d*d sub-pixels per channel: their first layer mixes them with a 1x1
+        first = 1 if d > 1 else 3
+        if n:
+            self.reweight = Reweighting(len(self.rgbd) * (n + 1) * d * d, n, config.reweight_width, first)
+        self.reconstruct = UNet(frame_channels * (n + 1) * d * d, 3 * d * d, config.widths, first)
+
+    def forward(self, lr: torch.Tensor, motion: torch.Tensor, jitter: torch.Tensor) -> torch.Tensor:
+        cfg = self.config
+        s, d, n = cfg.scale, cfg.fold, cfg.previous_frames
+        b, frames, c, h, w = lr.shape
+        feats = self.features(lr.reshape(b * frames, c, h, w)).reshape(b, frames, -1, h, w)
+        upsampled = [zero_upsample(feats[:, k], jitter[:, k], s) for k in range(n + 1)]
+        hr_motion = [upsample_motion(motion[:, k], s) for k in range(n)]  # frame k's vectors to k+1
+        warped = [upsampled[0]]
+        for k in range(1, n + 1):
+            x = upsampled[k]
+            for j in reversed(range(k)):  # t-k -> t-k+1 -> ... -> t, with frame j's vectors
+                x = backward_warp(x, hr_motion[j])
+            warped.append(x)
+        stack = [F.pixel_unshuffle(x, d) if d > 1 else x for x in warped]
+        if n:
+            rgbd = torch.cat([F.pixel_unshuffle(x[:, self.rgbd], d) if d > 1 else x[:, self.rgbd]
+                              for x in warped], dim=1)
+            weights = self.reweight(rgbd)  # (B, N, H/d, W/d)
+            stack = [stack[0]] + [stack[k] * weights[:, k - 1:k] for k in range(1, n + 1)]
+        out = self.reconstruct(torch.cat(stack, dim=1))
+        if d > 1:
+            out = F.pixel_shuffle(out, d)
+        base = F.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
+        return out + base

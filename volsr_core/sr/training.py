@@ -1,0 +1,237 @@
+"""The training loop: AdamW + warmup/cosine, AMP on CUDA, checkpoints, exact resume, DDP.
+
+Exact resume: the batch of step k depends only on (seed, k): epoch e = k // steps_per_epoch
+shuffles the training samples with generator seed (seed, e), and the dataset seeds each item's
+crop and flips with (seed, e, index). A checkpoint holds the model, optimiser, scheduler, AMP
+scaler, step and RNG states, so stopping at any checkpoint and resuming reproduces the
+uninterrupted run. Under ``torchrun`` (WORLD_SIZE > 1) each rank takes every world-th sample of
+each global batch and gradients are averaged by DistributedDataParallel (gloo on CPU, NCCL on CUDA).
+"""
+from __future__ import annotations
+
+import csv
+import math
+import os
+import random
+import time
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from torch.utils.data import DataLoader, Sampler
+
+from volsr_core.atomic import atomic_write
+from volsr_core.sr.checkpoint import save_checkpoint, load_checkpoint
+from volsr_core.sr.dataset import SequenceDataset
+from volsr_core.sr.losses import ReconstructionLoss
+from volsr_core.sr.metrics import psnr_ssim
+from volsr_core.sr.network import NetworkConfig, SuperResolutionNet, variant_config
+
+LOG_FIELDS = ["step", "epoch", "loss", "lr", "val_psnr", "val_ssim", "seconds"]
+
+
+class EpochSamples(torch.utils.data.Dataset):
+    """Wraps a SequenceDataset so that a sampler can name (epoch, index): seeded per epoch in workers too."""
+
+    def __init__(self, dataset: SequenceDataset):
+        self.dataset = dataset
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def __getitem__(self, key: tuple[int, int]) -> dict[str, torch.Tensor]:
+        epoch, index = key
+        self.dataset.set_epoch(epoch)
+        return self.dataset[index]
+
+
+class StepBatches(Sampler):
+    """Yields, for steps start..steps-1, this rank's share of the global batch as (epoch, index) keys."""
+
+    def __init__(self, n_samples: int, global_batch: int, seed: int, start: int, steps: int, rank: int = 0,
+                 world: int = 1):
+        self.n, self.batch, self.seed = n_samples, global_batch, seed
+        self.start, self.steps, self.rank, self.world = start, steps, rank, world
+        self.per_epoch = max(n_samples // global_batch, 1)
+
+    def __len__(self) -> int:
+        return self.steps - self.start
+
+    def __iter__(self) -> Iterator[list[tuple[int, int]]]:
+        order, order_epoch = None, -1
+        for step in range(self.start, self.steps):
+            epoch, position = divmod(step, self.per_epoch)
+            if epoch != order_epoch:
+                g = torch.Generator().manual_seed(self.seed * 1_000_003 + epoch)
+                order, order_epoch = torch.randperm(self.n, generator=g), epoch
+            picked = order[(position * self.batch) % self.n:][: self.batch]
+            if len(picked) < self.batch:  # fewer samples than a batch: wrap around
+                picked = order.repeat(math.ceil(self.batch / self.n))[: self.batch]
+            yield [(epoch, int(i)) for i in picked[self.rank::self.world]]
+
+
+def build_model(config: dict[str, Any]) -> SuperResolutionNet:
+    data, model = config["data"], config["model"]
+    net = variant_config(model["variant"], data["scale"], data["previous_frames"], tuple(data["features"]))
+    overrides = {k: (tuple(v) if isinstance(v, list) else v) for k, v in model.items()
+                 if k in ("fold", "widths") and v is not None}
+    if overrides:
+        net = NetworkConfig(**{**net.to_dict(), **overrides})
+    return SuperResolutionNet(net)
+
+
+def lr_factor(step: int, warmup: int, total: int, min_ratio: float) -> float:
+    """Linear warm-up to 1 over ``warmup`` steps, then cosine down to ``min_ratio`` at ``total``."""
+    if step < warmup:
+        return (step + 1) / warmup
+    progress = min((step - warmup) / max(total - warmup, 1), 1.0)
+    return min_ratio + (1.0 - min_ratio) * 0.5 * (1.0 + math.cos(math.pi * progress))
+
+
+class Trainer:
+    """``Trainer(config).run()`` trains to ``train.steps``, resuming from ``out/checkpoints/last.pt``."""
+
+    def __init__(self, config: dict[str, Any], progress: bool = True):
+        self.config, self.progress = config, progress
+        self.world = int(os.environ.get("WORLD_SIZE", "1"))
+        self.rank = int(os.environ.get("RANK", "0"))
+        self.device = torch.device(f"cuda:{int(os.environ.get('LOCAL_RANK', 0))}" if torch.cuda.is_available() else "cpu")
+        if self.world > 1 and not dist.is_initialized():
+            dist.init_process_group("nccl" if self.device.type == "cuda" else "gloo")
+        if self.device.type == "cuda":
+            torch.cuda.set_device(self.device)
+        self.out = Path(config["out"])
+        data = config["data"]
+        self.train_set = SequenceDataset(data["root"], "train", data["scale"], data["previous_frames"], data["crop"],
+                                         tuple(data["features"]), augment=data["augment"], seed=config["seed"])
+        self.val_set = SequenceDataset(data["root"], "val", data["scale"], data["previous_frames"],
+                                       data["val_crop"], tuple(data["features"]), augment=False, seed=config["seed"])
+        torch.manual_seed(config["seed"])
+        self.model = build_model(config).to(self.device)
+        optim = config["optim"]
+        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=optim["lr"], weight_decay=optim["weight_decay"])
+        steps = config["train"]["steps"]
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(
+            self.optimizer, lambda s: lr_factor(s, optim["warmup_steps"], steps, optim["min_lr_ratio"]))
+        self.amp = bool(config["train"]["amp"]) and self.device.type == "cuda"
+        self.scaler = torch.amp.GradScaler("cuda", enabled=self.amp)
+        self.loss = ReconstructionLoss(config["loss"]["charbonnier_eps"], config["loss"]["ssim_weight"])
+        self.step, self.best_psnr = 0, -math.inf
+        self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.world > 1 else self.model)
+
+    # -- state ---------------------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        return {"model": self.model.state_dict(), "network": self.model.config.to_dict(),
+                "optimizer": self.optimizer.state_dict(), "scheduler": self.scheduler.state_dict(),
+                "scaler": self.scaler.state_dict(), "step": self.step, "best_psnr": self.best_psnr,
+                "rng": {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()},
+                "config": self.config}
+
+    def restore(self, path: Path) -> None:
+        state = load_checkpoint(path, trusted=True)
+        self.model.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.scheduler.load_state_dict(state["scheduler"])
+        self.scaler.load_state_dict(state["scaler"])
+        self.step, self.best_psnr = int(state["step"]), float(state["best_psnr"])
+        torch.set_rng_state(state["rng"]["torch"])
+        np.random.set_state(state["rng"]["numpy"])
+        random.setstate(state["rng"]["python"])
+
+    # -- loop ----------------------------------------------------------------------------------
+    def run(self, until: int | None = None) -> dict[str, Any]:
+        """Train from the last checkpoint to ``train.steps`` (or stop after step ``until``, checkpointing)."""
+        cfg = self.config["train"]
+        last = self.out / "checkpoints" / "last.pt"
+        if last.exists():
+            self.restore(last)
+        if self.rank == 0:
+            (self.out / "checkpoints").mkdir(parents=True, exist_ok=True)
+            self._trim_log()
+        global_batch = cfg["batch_size"]
+        stop = cfg["steps"] if until is None else min(until, cfg["steps"])
+        sampler = StepBatches(len(self.train_set), global_batch, self.config["seed"], self.step, stop,
+                              self.rank, self.world)
+        validate_every = cfg["validate_every"] or sampler.per_epoch
+        loader = DataLoader(EpochSamples(self.train_set), batch_sampler=sampler,
+                            num_workers=self.config["data"]["num_workers"], persistent_workers=False)
+        bar = None
+        if self.progress and self.rank == 0:
+            from tqdm import tqdm
+            bar = tqdm(total=cfg["steps"], initial=self.step, desc="train", unit="step")
+        started = time.perf_counter()
+        self.model.train()
+        for batch in loader:
+            loss = self.train_step(batch)
+            self.step += 1
+            row = {"step": self.step, "epoch": (self.step - 1) // sampler.per_epoch, "loss": f"{loss:.6f}",
+                   "lr": f"{self.scheduler.get_last_lr()[0]:.3e}", "val_psnr": "", "val_ssim": "",
+                   "seconds": f"{time.perf_counter() - started:.1f}"}
+            if self.step % validate_every == 0 or self.step == cfg["steps"]:
+                metrics = self.validate()
+                row["val_psnr"], row["val_ssim"] = f"{metrics['psnr']:.3f}", f"{metrics['ssim']:.4f}"
+                if self.rank == 0 and metrics["psnr"] > self.best_psnr:
+                    self.best_psnr = metrics["psnr"]
+                    save_checkpoint(self.out / "best.pt", self.model, extra={"step": self.step, **metrics})
+            if self.rank == 0:
+                self._log(row)
+                if self.step % cfg["checkpoint_every"] == 0 or self.step == stop:
+                    save_checkpoint(last, state=self.state())
+                    save_checkpoint(self.out / "checkpoints" / f"step_{self.step:07d}.pt", state=self.state())
+                if bar is not None:
+                    bar.set_postfix(loss=row["loss"], val=row["val_psnr"] or None)
+                    bar.update(1)
+        if bar is not None:
+            bar.close()
+        return {"step": self.step, "best_psnr": self.best_psnr}
+
+    def train_step(self, batch: dict[str, torch.Tensor]) -> float:
+        lr, motion, jitter, hr = (batch[k].to(self.device) for k in ("lr", "motion", "jitter", "hr"))
+        self.optimizer.zero_grad(set_to_none=True)
+        with torch.autocast(self.device.type, dtype=torch.float16, enabled=self.amp):
+            loss = self.loss(self.ddp(lr, motion, jitter), hr)
+        self.scaler.scale(loss).backward()
+        self.scaler.step(self.optimizer)
+        self.scaler.update()
+        self.scheduler.step()
+        return float(loss.detach())
+
+    @torch.no_grad()
+    def validate(self) -> dict[str, float]:
+        """Mean PSNR/SSIM (scikit-image) on up to ``train.max_val_samples`` validation samples."""
+        self.model.eval()
+        n = min(len(self.val_set), self.config["train"]["max_val_samples"])
+        picks = np.linspace(0, len(self.val_set) - 1, n).round().astype(int) if n else []
+        scores = []
+        for i in picks:
+            item = self.val_set[int(i)]
+            out = self.model(*(item[k][None].to(self.device) for k in ("lr", "motion", "jitter")))
+            scores.append(psnr_ssim(out[0].float().cpu().numpy(), item["hr"].numpy()))
+        self.model.train()
+        if not scores:
+            return {"psnr": float("nan"), "ssim": float("nan")}
+        return {"psnr": float(np.mean([s[0] for s in scores])), "ssim": float(np.mean([s[1] for s in scores]))}
+
+    # -- CSV log -------------------------------------------------------------------------------
+    def _log(self, row: dict[str, Any]) -> None:
+        path = self.out / "log.csv"
+        new = not path.exists()
+        with path.open("a", newline="") as fh:
+            writer = csv.DictWriter(fh, LOG_FIELDS)
+            if new:
+                writer.writeheader()
+            writer.writerow(row)
+
+    def _trim_log(self) -> None:
+        """Drop log rows past the resumed step (they belong to a run that was cut off)."""
+        path = self.out / "log.csv"
+        if not path.exists():
+            return
+        with path.open(newline="") as fh:
+            rows = [r for r in csv.DictReader(fh) if int(r["step"]) <= self.step]
+        with atomic_write(path, "w", newline="") as fh:
+            writer = csv.DictWriter(fh, LOG_FIELDS)
+            writer.writeheader()
+            writer.writerows(rows)
