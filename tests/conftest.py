@@ -33,3 +33,32 @@ def headsq_dicom(shared_data: Path) -> Path:
 @pytest.fixture(scope="session")
 def ct_avm_path(shared_data: Path) -> Path:
     return shared_data / "volumes" / "CT_AVM.nii.gz"
+
+
+TINY_SEQUENCES = """\
+seed: 3
+hr_size: 32
+scales: [4]
+frames_per_video: 3
+previous_frames: 2
+ground_truth: {mode: supersampled, spp: 2}
+camera: {pool_size: 8, distance_range: [0.35, 0.45]}  # close up: the volume fills the 32-pixel frames
+volumes:
+  - name: phantom
+    path: phantom
+    phantom_shape: [40, 40, 40]
+    transfer_function: {preset: CT-Phantom}
+    videos: 3
+"""
+
+
+@pytest.fixture(scope="session")
+def tiny_sequences(tmp_path_factory) -> Path:
+    """A dataset of 3 phantom videos x 3 frames at 32² (scale 4), one video per split."""
+    from volsr_core.temporal.dataset_config import read_config
+    from volsr_core.temporal.sequences import generate
+
+    folder = tmp_path_factory.mktemp("tiny_sequences")
+    (folder / "tiny.yaml").write_text(TINY_SEQUENCES)
+    generate(read_config(folder / "tiny.yaml"), folder / "set", log=lambda text: None, progress=False)
+    return folder / "set"

@@ -1,7 +1,8 @@
 """Training: a tiny model overfits a tiny sequence, resume is exact, torchrun (gloo, 2 CPUs) runs.
 
-The dataset: 3 phantom videos of 3 frames (one each for train, val and test), so with 2 previous
-frames the training split is one sample: the sequence the model overfits.
+The dataset (conftest's ``tiny_sequences``): 3 phantom videos of 3 frames, one each for train,
+val and test, so with 2 previous frames the training split is one sample: the sequence the
+model overfits.
 """
 from __future__ import annotations
 
@@ -19,33 +20,6 @@ torch = pytest.importorskip("torch")
 from volsr_core.sr.checkpoint import load_checkpoint  # noqa: E402
 from volsr_core.sr.config import load_training_config  # noqa: E402
 from volsr_core.sr.training import Trainer  # noqa: E402
-from volsr_core.temporal.dataset_config import read_config  # noqa: E402
-from volsr_core.temporal.sequences import generate  # noqa: E402
-
-DATASET = """\
-seed: 3
-hr_size: 32
-scales: [4]
-frames_per_video: 3
-previous_frames: 2
-ground_truth: {mode: supersampled, spp: 2}
-camera: {pool_size: 8, distance_range: [0.35, 0.45]}  # close up: the volume fills the 32-pixel frames
-volumes:
-  - name: phantom
-    path: phantom
-    phantom_shape: [40, 40, 40]
-    transfer_function: {preset: CT-Phantom}
-    videos: 3
-"""
-
-
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("data")
-    (folder / "tiny.yaml").write_text(DATASET)
-    generate(read_config(folder / "tiny.yaml"), folder / "set", log=lambda text: None, progress=False)
-    return folder / "set"
-
 
 def write_config(folder: Path, dataset: Path, **train) -> Path:
     config = {
@@ -66,8 +40,8 @@ def losses(run: Path) -> list[float]:
         return [float(r["loss"]) for r in csv.DictReader(fh)]
 
 
-def test_a_tiny_model_overfits_a_tiny_sequence(dataset, tmp_path):
-    path = write_config(tmp_path, dataset, steps=150, checkpoint_every=150, validate_every=150)
+def test_a_tiny_model_overfits_a_tiny_sequence(tiny_sequences, tmp_path):
+    path = write_config(tmp_path, tiny_sequences, steps=150, checkpoint_every=150, validate_every=150)
     config = load_training_config(path)
     config["data"]["augment"] = False
     config["model"]["widths"] = [16, 24]
@@ -79,10 +53,10 @@ def test_a_tiny_model_overfits_a_tiny_sequence(dataset, tmp_path):
     assert last <= first / 10
 
 
-def test_resume_gives_the_weights_of_an_uninterrupted_run(dataset, tmp_path):
-    straight = load_training_config(write_config(tmp_path / "a", dataset))
+def test_resume_gives_the_weights_of_an_uninterrupted_run(tiny_sequences, tmp_path):
+    straight = load_training_config(write_config(tmp_path / "a", tiny_sequences))
     Trainer(straight, progress=False).run()
-    interrupted = load_training_config(write_config(tmp_path / "b", dataset))
+    interrupted = load_training_config(write_config(tmp_path / "b", tiny_sequences))
     Trainer(interrupted, progress=False).run(until=4)
     assert load_checkpoint(tmp_path / "b" / "run" / "checkpoints" / "last.pt", trusted=True)["step"] == 4
     Trainer(interrupted, progress=False).run()  # a new process would do the same: resumes from last.pt
@@ -93,8 +67,8 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(dataset, tmp_path):
     assert losses(tmp_path / "a" / "run") == losses(tmp_path / "b" / "run")
 
 
-def test_torchrun_two_cpu_processes(dataset, tmp_path):
-    config = write_config(tmp_path, dataset, steps=4, checkpoint_every=2)
+def test_torchrun_two_cpu_processes(tiny_sequences, tmp_path):
+    config = write_config(tmp_path, tiny_sequences, steps=4, checkpoint_every=2)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     result = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
                              "-m", "volsr_core.cli", "train", str(config)], capture_output=True, text=True,

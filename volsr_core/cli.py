@@ -197,6 +197,21 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- volsr eval -----------------------------------------------------------------------------------
+def cmd_eval(args: argparse.Namespace) -> int:
+    from volsr_core.sr.checkpoint import load_model
+    from volsr_core.sr.evaluation import METHODS, evaluate, write_report
+
+    model = load_model(args.model)
+    results, showcase = evaluate(model, args.data, args.split)
+    written = write_report(results, showcase, args.out)
+    for name in METHODS:
+        o = results["overall"][name]
+        print(f"{name:9s} PSNR {o['psnr']:6.2f} dB   SSIM {o['ssim']:.4f}   temporal error {o['temporal']:.4f}")
+    print(f"wrote {', '.join(p.name for p in written)} to {args.out}")
+    return 0
+
+
 # -- entry point ----------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="volsr", description="Learned super-resolution for medical volume rendering.")
@@ -248,6 +263,14 @@ def build_parser() -> argparse.ArgumentParser:
                            "several processes: torchrun --nproc_per_node N -m volsr_core.cli train CONFIG")
     train.add_argument("config", help="training config, YAML (training/configs/*.yaml)")
     train.set_defaults(run=cmd_train)
+
+    ev = sub.add_parser("eval", help="the network vs bilinear, bicubic and TAAU on a dataset split: JSON, "
+                        "markdown table, plots, zoomed crops")
+    ev.add_argument("model", help="model file (best.pt) or training checkpoint")
+    ev.add_argument("--data", required=True, metavar="DIR", help="dataset folder (volsr dataset)")
+    ev.add_argument("--split", default="test", choices=("train", "val", "test"), help="[test]")
+    ev.add_argument("--out", default="out/eval", metavar="DIR", help="report folder [out/eval]")
+    ev.set_defaults(run=cmd_eval)
     return parser
 
 

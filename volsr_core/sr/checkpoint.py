@@ -80,3 +80,27 @@ def sha256(path: str | os.PathLike) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def load_model(path: str | os.PathLike, expected_sha256: str | None = None) -> "torch.nn.Module":
+    """A SuperResolutionNet from a model file (or a training checkpoint), weights only.
+
+    With ``expected_sha256`` the file's hash must match, else a one-line InputError.
+    """
+    from volsr_core.sr.network import NetworkConfig, SuperResolutionNet
+
+    if expected_sha256 is not None and Path(path).is_file():
+        actual = sha256(path)
+        if actual != expected_sha256.lower():
+            raise InputError(path, f"SHA-256 {actual[:16]}... does not match the expected {expected_sha256[:16]}...")
+    payload = load_checkpoint(path, trusted=True)
+    if payload.get("format") != MODEL_FORMAT and "model" not in payload:
+        raise InputError(path, f"not a VolSR model file or training checkpoint (format {payload.get('format')!r})")
+    try:
+        network = payload["network"]
+        model = SuperResolutionNet(NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v
+                                                    for k, v in network.items()}))
+        model.load_state_dict(payload["state_dict"] if "state_dict" in payload else payload["model"])
+    except (KeyError, TypeError, ValueError, RuntimeError) as err:
+        raise InputError(path, f"model file does not fit the network: {' '.join(str(err).split())[:160]}") from None
+    return model.eval()

@@ -1,0 +1,202 @@
+"""``volsr eval``: the network against bilinear, bicubic and TAAU on the same frames of a dataset split.
+
+Per video and frame t >= N (the frames the network can see N previous frames for): PSNR and
+SSIM from scikit-image against the HR ground truth, and a temporal-stability error: the mean
+absolute difference between the output's and the ground truth's frame-to-frame change after
+backward-warping frame t-1 onto t with the (upsampled) motion vectors, over pixels whose
+reprojection stays on screen. Lower is steadier; 0 means the output flickers exactly as the
+ground truth changes. TAAU runs over each whole video from frame 0, as it would live.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+import h5py
+import numpy as np
+import torch
+
+from volsr_core.atomic import atomic_write
+from volsr_core.sr.dataset import SequenceDataset
+from volsr_core.sr.metrics import psnr_ssim
+from volsr_core.sr.network import SuperResolutionNet
+from volsr_core.temporal.taau import TemporalUpsampler, upscale_bicubic, upscale_bilinear
+from volsr_core.temporal.warp import backward_warp
+
+METHODS = ("bilinear", "bicubic", "TAAU", "VolSR")
+
+
+def temporal_error(out_prev: np.ndarray, out: np.ndarray, gt_prev: np.ndarray, gt: np.ndarray,
+                   hr_motion: np.ndarray) -> float:
+    """Mean |(out_t - warp(out_t-1)) - (gt_t - warp(gt_t-1))| over pixels that stay on screen."""
+    warped_out, valid = backward_warp(out_prev, hr_motion)
+    warped_gt, _ = backward_warp(gt_prev, hr_motion)
+    diff = np.abs((out - warped_out) - (gt - warped_gt)).mean(axis=-1)
+    return float(diff[valid].mean()) if valid.any() else float("nan")
+
+
+class VideoFrames:
+    """One video's LR colour, motion, jitter and HR ground truth at one scale, read from its store."""
+
+    def __init__(self, path: Path, scale: int):
+        with h5py.File(path, "r") as h5:
+            self.lr = h5[f"lr{scale}/color"][()].astype(np.float32)
+            self.motion = h5[f"lr{scale}/motion"][()].astype(np.float32)
+            self.jitter = h5[f"lr{scale}/jitter"][()].astype(np.float32)
+            self.hr = h5["hr/color"][()].astype(np.float32)
+
+    def hr_motion(self, t: int, scale: int) -> np.ndarray:
+        return upscale_bilinear(self.motion[t], scale) * scale
+
+
+def _baselines(video: VideoFrames, scale: int) -> dict[str, Callable[[int], np.ndarray]]:
+    taau = TemporalUpsampler(scale)
+    taau_frames = [taau(video.lr[t], video.motion[t], tuple(video.jitter[t])) for t in range(len(video.lr))]
+    return {"bilinear": lambda t: upscale_bilinear(video.lr[t], scale),
+            "bicubic": lambda t: np.clip(upscale_bicubic(video.lr[t], scale), 0.0, 1.0),
+            "TAAU": lambda t: taau_frames[t]}
+
+
+@torch.no_grad()
+def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str = "test",
+             progress: bool = True) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Metrics per video, method and frame, plus per-method means over all evaluated frames.
+
+    Also returns a showcase: the middle evaluated frame of the first video, per method and "ground
+    truth", for the crop grid.
+    """
+    cfg = model.config
+    model.eval()
+    data = SequenceDataset(data_root, split, cfg.scale, cfg.previous_frames, crop=None, features=cfg.features,
+                           augment=False)
+    by_video: dict[int, list[int]] = {}
+    for index, (video_index, _) in enumerate(data.samples):
+        by_video.setdefault(video_index, []).append(index)
+    results: dict[str, Any] = {"split": split, "scale": cfg.scale, "previous_frames": cfg.previous_frames,
+                               "videos": {}}
+    showcase: dict[str, np.ndarray] = {}
+    iterator = by_video.items()
+    if progress:
+        from tqdm import tqdm
+        iterator = tqdm(list(iterator), desc=f"eval {split}", unit="video")
+    for video_index, indices in iterator:
+        meta = data.videos[video_index]
+        frames = VideoFrames(data.root / meta["file"], cfg.scale)
+        methods = _baselines(frames, cfg.scale)
+        network_out: dict[int, np.ndarray] = {}
+        for index in indices:
+            item = data[index]
+            t = int(item["frame"])
+            y = model(*(item[k][None] for k in ("lr", "motion", "jitter")))[0]
+            network_out[t] = np.clip(y.permute(1, 2, 0).numpy(), 0.0, 1.0)
+        methods["VolSR"] = network_out.__getitem__
+        ts = sorted(network_out)
+        video: dict[str, Any] = {"volume": meta["volume"], "frames": ts}
+        for name in METHODS:
+            outputs = {t: methods[name](t) for t in ts}
+            scores = [psnr_ssim(outputs[t], frames.hr[t], channel_axis=-1) for t in ts]
+            temporal = [temporal_error(outputs[a], outputs[b], frames.hr[a], frames.hr[b],
+                                       frames.hr_motion(b, cfg.scale)) for a, b in zip(ts, ts[1:])]
+            video[name] = {"psnr": [s[0] for s in scores], "ssim": [s[1] for s in scores], "temporal": temporal}
+        results["videos"][meta["id"]] = video
+        if not showcase:
+            middle = ts[len(ts) // 2]
+            showcase = {"ground truth": frames.hr[middle], **{name: methods[name](middle) for name in METHODS}}
+    results["overall"] = {name: {metric: _mean([v for video in results["videos"].values() for v in video[name][metric]])
+                                 for metric in ("psnr", "ssim", "temporal")} for name in METHODS}
+    return results, showcase
+
+
+def crop_grid(showcase: dict[str, np.ndarray], crop: int = 64, zoom: int = 3) -> np.ndarray:
+    """The ``crop``-pixel square with the most detail in the ground truth, zoomed, one labelled panel per image."""
+    from PIL import Image, ImageDraw
+
+    gt = showcase["ground truth"]
+    energy = np.abs(np.diff(gt.mean(-1), axis=0))[:, :-1] + np.abs(np.diff(gt.mean(-1), axis=1))[:-1]
+    crop = min(crop, *energy.shape)
+    sums = energy.cumsum(0).cumsum(1)
+    window = sums[crop - 1:, crop - 1:].copy()
+    window[1:] -= sums[:-crop, crop - 1:]
+    window[:, 1:] -= sums[crop - 1:, :-crop]
+    window[1:, 1:] += sums[:-crop, :-crop]
+    y, x = np.unravel_index(np.argmax(window), window.shape)
+    panels = []
+    for name, image in showcase.items():
+        patch = np.clip(image[y:y + crop, x:x + crop], 0, 1).repeat(zoom, 0).repeat(zoom, 1)
+        panel = Image.fromarray((patch * 255).round().astype(np.uint8))
+        ImageDraw.Draw(panel).text((4, 4), name, fill=(255, 255, 0))
+        panels.append(np.asarray(panel))
+    return np.concatenate(panels, axis=1)
+
+
+def _mean(values: list[float]) -> float:
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
+def markdown_table(results: dict[str, Any]) -> str:
+    """Per-method means, overall and per video, as a markdown table."""
+    lines = [f"Split `{results['split']}`, {results['scale']}x, {results['previous_frames']} previous frames. "
+             "PSNR/SSIM: higher is better; temporal error: lower is better.", "",
+             "| video | volume | method | PSNR dB | SSIM | temporal error |", "|---|---|---|---|---|---|"]
+    for name in METHODS:
+        o = results["overall"][name]
+        lines.append(f"| **all** | | {name} | **{o['psnr']:.2f}** | **{o['ssim']:.4f}** | **{o['temporal']:.4f}** |")
+    for vid, video in results["videos"].items():
+        for name in METHODS:
+            m = video[name]
+            lines.append(f"| {vid} | {video['volume']} | {name} | {_mean(m['psnr']):.2f} | {_mean(m['ssim']):.4f} "
+                         f"| {_mean(m['temporal']):.4f} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(results: dict[str, Any], showcase: dict[str, np.ndarray], out_dir: str | os.PathLike) -> list[Path]:
+    """eval.json, eval.md, the plots (PSNR per frame, bars per method) and crops.png in ``out_dir``."""
+    from PIL import Image
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_write(out / "eval.json", "w") as fh:
+        json.dump(results, fh, indent=1)
+    with atomic_write(out / "eval.md", "w") as fh:
+        fh.write(markdown_table(results))
+    fig, ax = plt.subplots(figsize=(8, 4))
+    offset = 0
+    for vid, video in results["videos"].items():
+        x = np.arange(offset, offset + len(video["frames"]))
+        for i, name in enumerate(METHODS):
+            ax.plot(x, video[name]["psnr"], color=f"C{i}", label=name if offset == 0 else None)
+        offset += len(video["frames"]) + 2
+    ax.set_xlabel("frame (videos one after another)")
+    ax.set_ylabel("PSNR (dB)")
+    ax.legend()
+    fig.tight_layout()
+    _save(fig, out / "psnr_per_frame.png")
+    fig, axes = plt.subplots(1, 3, figsize=(10, 3.2))
+    for ax, metric in zip(axes, ("psnr", "ssim", "temporal")):
+        values = [results["overall"][m][metric] for m in METHODS]
+        ax.bar(METHODS, values, color=[f"C{i}" for i in range(len(METHODS))])
+        ax.set_title({"psnr": "PSNR (dB)", "ssim": "SSIM", "temporal": "temporal error"}[metric])
+        ax.tick_params(axis="x", rotation=30)
+        if metric == "psnr":
+            ax.set_ylim(min(values) - 2, max(values) + 1)
+    fig.tight_layout()
+    _save(fig, out / "methods.png")
+    with atomic_write(out / "crops.png") as fh:
+        Image.fromarray(crop_grid(showcase)).save(fh, format="PNG")
+    return [out / n for n in ("eval.json", "eval.md", "psnr_per_frame.png", "methods.png", "crops.png")]
+
+
+def _save(fig, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    with atomic_write(path) as fh:
+        fig.savefig(fh, format="png", dpi=120)
+    plt.close(fig)
