@@ -77,3 +77,32 @@ def test_reweighting_lies_in_zero_to_ten():
         w = net(torch.randn(4, 12, 9, 9) * 10)
     assert w.shape == (4, 3, 9, 9)
     assert w.min() >= 0 and w.max() <= 10 and w.min() < 0.1 and w.max() > 9.9
+
+
+@pytest.mark.parametrize("scale", (2, 4, 8))
+def test_the_folded_fast_path_equals_zero_upsampling_warping_and_folding(scale):
+    from volsr_core.sr.network import accumulated_flows, folded_stack, hr_stack
+
+    g = torch.Generator().manual_seed(scale)
+    feats = torch.rand(2, 3, 5, 6, 7, generator=g)
+    jitter = torch.rand(2, 3, 2, generator=g) - 0.5
+    flows = accumulated_flows([upsample_motion(torch.randn(2, 2, 6, 7, generator=g) * 1.5, scale) for _ in range(2)])
+    fast = folded_stack(feats, jitter, flows, scale, scale)
+    slow = hr_stack(feats, jitter, flows, scale, scale)
+    for a, b in zip(fast, slow):
+        assert a.shape == b.shape
+        assert torch.allclose(a, b, atol=1e-5)
+
+
+def test_accumulated_flows_chain_the_frames_vectors():
+    from volsr_core.sr.network import accumulated_flows
+
+    m0 = torch.zeros(1, 2, 8, 8)
+    m0[:, 0] = 1.0  # t -> t-1: one pixel right
+    m1 = torch.zeros(1, 2, 8, 8)
+    m1[:, 1] = -2.0  # t-1 -> t-2: two pixels up
+    flow1, flow2 = accumulated_flows([m0, m1])
+    assert torch.equal(flow1, m0)
+    inside = (slice(None), slice(None), slice(None), slice(0, 6))  # where t-1's vectors are read on screen
+    assert torch.allclose(flow2[inside][:, 0], torch.ones(1, 8, 6)) and torch.allclose(flow2[inside][:, 1],
+                                                                                        torch.full((1, 8, 6), -2.0))

@@ -111,13 +111,7 @@ def zero_upsample(x: torch.Tensor, jitter: torch.Tensor, scale: int) -> torch.Te
     LR pixel (i, j) rendered with jitter (jx, jy) sampled LR position (i + 0.5 + jx, j + 0.5 + jy),
     i.e. HR pixel (s*i + ox, s*j + oy) with o = floor(s * (0.5 + jitter)), clamped to [0, s-1].
     """
-    b, c, h, w = x.shape
-    offset = torch.clamp(torch.floor(scale * (0.5 + jitter)), 0, scale - 1)  # (B, 2): ox, oy
-    slot = offset[:, 1] * scale + offset[:, 0]                                  # (B,)
-    slots = torch.arange(scale * scale, device=x.device, dtype=x.dtype)
-    onehot = (slots[None, :] == slot[:, None]).to(x.dtype)                     # (B, s*s)
-    spread = x.unsqueeze(2) * onehot[:, None, :, None, None]                   # (B, C, s*s, h, w)
-    return F.pixel_shuffle(spread.reshape(b, c * scale * scale, h, w), scale)
+    return F.pixel_shuffle(zero_upsample_folded(x, jitter, scale), scale)
 
 
 def upsample_motion(motion: torch.Tensor, scale: int) -> torch.Tensor:
@@ -200,18 +194,11 @@ class SuperResolutionNet(nn.Module):
         s, d, n = cfg.scale, cfg.fold, cfg.previous_frames
         b, frames, c, h, w = lr.shape
         feats = self.features(lr.reshape(b * frames, c, h, w)).reshape(b, frames, -1, h, w)
-        upsampled = [zero_upsample(feats[:, k], jitter[:, k], s) for k in range(n + 1)]
-        hr_motion = [upsample_motion(motion[:, k], s) for k in range(n)]  # frame k's vectors to k+1
-        warped = [upsampled[0]]
-        for k in range(1, n + 1):
-            x = upsampled[k]
-            for j in reversed(range(k)):  # t-k -> t-k+1 -> ... -> t, with frame j's vectors
-                x = backward_warp(x, hr_motion[j])
-            warped.append(x)
-        stack = [F.pixel_unshuffle(x, d) if d > 1 else x for x in warped]
+        flows = accumulated_flows([upsample_motion(motion[:, k], s) for k in range(n)])
+        stack = (folded_stack if d == s else hr_stack)(feats, jitter, flows, s, d)
         if n:
-            rgbd = torch.cat([F.pixel_unshuffle(x[:, self.rgbd], d) if d > 1 else x[:, self.rgbd]
-                              for x in warped], dim=1)
+            dd = d * d
+            rgbd = torch.cat([x[:, ch * dd:(ch + 1) * dd] for x in stack for ch in self.rgbd], dim=1)
             weights = self.reweight(rgbd)  # (B, N, H/d, W/d)
             stack = [stack[0]] + [stack[k] * weights[:, k - 1:k] for k in range(1, n + 1)]
         out = self.reconstruct(torch.cat(stack, dim=1))
@@ -219,3 +206,70 @@ class SuperResolutionNet(nn.Module):
             out = F.pixel_shuffle(out, d)
         base = F.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
         return out + base
+
+
+def accumulated_flows(hr_motion: list[torch.Tensor]) -> list[torch.Tensor]:
+    """Flows from the current frame to frames t-1, t-2, ...: the vectors chained through each frame.
+
+    ``hr_motion[j]`` holds frame t-j's vectors to frame t-j-1 (HR pixels). The flow to t-k is the
+    flow to t-k+1 plus frame t-k+1's vectors read where that flow lands, so each previous frame
+    is resampled once, not once per step.
+    """
+    flows: list[torch.Tensor] = []
+    for m in hr_motion:
+        flows.append(m if not flows else flows[-1] + backward_warp(m, flows[-1]))
+    return flows
+
+
+def hr_stack(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor], scale: int,
+             fold: int) -> list[torch.Tensor]:
+    """Per frame: zero-upsample to HR, backward-warp previous frames with their flow, fold by ``fold``."""
+    out = []
+    for k in range(feats.shape[1]):
+        x = zero_upsample(feats[:, k], jitter[:, k], scale)
+        if k:
+            x = backward_warp(x, flows[k - 1])
+        out.append(F.pixel_unshuffle(x, fold) if fold > 1 else x)
+    return out
+
+
+def folded_stack(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor], scale: int,
+                 fold: int) -> list[torch.Tensor]:
+    """:func:`hr_stack` for ``fold == scale``, computed without any HR feature tensor.
+
+    The current frame's zero-upsampled, folded features are its samples in their jitter slot.
+    A previous frame's: bilinearly sampling a zero-upsampled image at q meets at most one
+    sample per axis (samples lie ``scale`` >= 2 pixels apart), so it is that LR sample (nearest
+    lattice point) times the tent weight of its distance to q; the sampling grid is laid out in
+    folded order, so the result needs a reshape, not a transpose.
+    """
+    b, _, c, h, w = feats.shape
+    s2 = scale * scale
+    out = [zero_upsample_folded(feats[:, 0], jitter[:, 0], scale)]
+    ys = torch.arange(h * scale, device=feats.device, dtype=feats.dtype).view(1, -1, 1)
+    xs = torch.arange(w * scale, device=feats.device, dtype=feats.dtype).view(1, 1, -1)
+    for k in range(1, feats.shape[1]):
+        flow = flows[k - 1]
+        q = F.pixel_unshuffle(torch.stack([xs + 0.5 + flow[:, 0], ys + 0.5 + flow[:, 1]], dim=1), scale)
+        qx, qy = q[:, :s2], q[:, s2:]  # (B, s*s, h, w): HR positions in frame t-k, folded order
+        offset = torch.clamp(torch.floor(scale * (0.5 + jitter[:, k])), 0, scale - 1)
+        ox, oy = offset[:, 0].view(b, 1, 1, 1), offset[:, 1].view(b, 1, 1, 1)
+        ix = torch.round((qx - ox - 0.5) / scale)
+        iy = torch.round((qy - oy - 0.5) / scale)
+        weight = (F.relu(1.0 - torch.abs(qx - (scale * ix + ox + 0.5)))
+                  * F.relu(1.0 - torch.abs(qy - (scale * iy + oy + 0.5))))
+        grid = torch.stack([2.0 * (ix + 0.5) / w - 1.0, 2.0 * (iy + 0.5) / h - 1.0], dim=-1)
+        picked = F.grid_sample(feats[:, k], grid.reshape(b, s2 * h, w, 2), mode="nearest", padding_mode="zeros",
+                               align_corners=False)  # (B, C, s*s*h, w)
+        out.append((picked * weight.reshape(b, 1, s2 * h, w)).reshape(b, c * s2, h, w))
+    return out
+
+
+def zero_upsample_folded(x: torch.Tensor, jitter: torch.Tensor, scale: int) -> torch.Tensor:
+    """``pixel_unshuffle(zero_upsample(x, jitter, scale), scale)`` without the HR tensor: (B, C*s*s, h, w)."""
+    b, c, h, w = x.shape
+    offset = torch.clamp(torch.floor(scale * (0.5 + jitter)), 0, scale - 1)
+    slot = offset[:, 1] * scale + offset[:, 0]
+    slots = torch.arange(scale * scale, device=x.device, dtype=x.dtype)
+    onehot = (slots[None, :] == slot[:, None]).to(x.dtype)
+    return (x.unsqueeze(2) * onehot[:, None, :, None, None]).reshape(b, c * scale * scale, h, w)
