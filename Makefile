@@ -10,7 +10,7 @@ export VTK_DEFAULT_OPENGL_WINDOW ?= vtkEGLRenderWindow
 $(STAMP):
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,vtk,torch]"
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,vtk,torch,onnx]"
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
