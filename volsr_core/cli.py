@@ -192,8 +192,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     trainer = Trainer(config)
     result = trainer.run()
     if trainer.rank == 0:
-        print(f"trained to step {result['step']}; best validation PSNR {result['best_psnr']:.2f} dB; "
-              f"checkpoints, best.pt and log.csv in {config['out']}")
+        best = (f"best validation PSNR {result['best_psnr']:.2f} dB (best.pt)" if result["best_psnr"] > float("-inf")
+                else "no validation frames, so no best.pt")
+        print(f"trained to step {result['step']}; {best}; checkpoints and log.csv in {config['out']}")
     return 0
 
 
