@@ -240,14 +240,15 @@ def folded_stack(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Te
     The current frame's zero-upsampled, folded features are its samples in their jitter slot.
     A previous frame's: bilinearly sampling a zero-upsampled image at q meets at most one
     sample per axis (samples lie ``scale`` >= 2 pixels apart), so it is that LR sample (nearest
-    lattice point) times the tent weight of its distance to q; the sampling grid is laid out in
-    folded order, so the result needs a reshape, not a transpose.
+    lattice point) times the tent weight of its distance to q. The samples' channel vectors are
+    gathered as rows of a channels-last table, with q laid out in folded order.
     """
     b, _, c, h, w = feats.shape
     s2 = scale * scale
     out = [zero_upsample_folded(feats[:, 0], jitter[:, 0], scale)]
     ys = torch.arange(h * scale, device=feats.device, dtype=feats.dtype).view(1, -1, 1)
     xs = torch.arange(w * scale, device=feats.device, dtype=feats.dtype).view(1, 1, -1)
+    first_row = (torch.arange(b, device=feats.device) * (h * w)).view(b, 1, 1, 1)
     for k in range(1, feats.shape[1]):
         flow = flows[k - 1]
         q = F.pixel_unshuffle(torch.stack([xs + 0.5 + flow[:, 0], ys + 0.5 + flow[:, 1]], dim=1), scale)
@@ -256,12 +257,14 @@ def folded_stack(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Te
         ox, oy = offset[:, 0].view(b, 1, 1, 1), offset[:, 1].view(b, 1, 1, 1)
         ix = torch.round((qx - ox - 0.5) / scale)
         iy = torch.round((qy - oy - 0.5) / scale)
-        weight = (F.relu(1.0 - torch.abs(qx - (scale * ix + ox + 0.5)))
-                  * F.relu(1.0 - torch.abs(qy - (scale * iy + oy + 0.5))))
-        grid = torch.stack([2.0 * (ix + 0.5) / w - 1.0, 2.0 * (iy + 0.5) / h - 1.0], dim=-1)
-        picked = F.grid_sample(feats[:, k], grid.reshape(b, s2 * h, w, 2), mode="nearest", padding_mode="zeros",
-                               align_corners=False)  # (B, C, s*s*h, w)
-        out.append((picked * weight.reshape(b, 1, s2 * h, w)).reshape(b, c * s2, h, w))
+        inside = ((ix >= 0) & (ix <= w - 1) & (iy >= 0) & (iy <= h - 1)).to(feats.dtype)
+        weight = inside * (F.relu(1.0 - torch.abs(qx - (scale * ix + ox + 0.5)))
+                           * F.relu(1.0 - torch.abs(qy - (scale * iy + oy + 0.5))))
+        # gather whole channel vectors of the nearest LR samples (rows of a channels-last table)
+        rows = (first_row + torch.clamp(iy, 0, h - 1).long() * w + torch.clamp(ix, 0, w - 1).long()).reshape(-1)
+        table = feats[:, k].permute(0, 2, 3, 1).reshape(b * h * w, c)
+        picked = torch.index_select(table, 0, rows).reshape(b, s2 * h * w, c).transpose(1, 2)  # (B, C, s*s*h*w)
+        out.append((picked.reshape(b, c, s2, h, w) * weight.unsqueeze(1)).reshape(b, c * s2, h, w))
     return out
 
 
