@@ -106,3 +106,33 @@ def test_accumulated_flows_chain_the_frames_vectors():
     inside = (slice(None), slice(None), slice(None), slice(0, 6))  # where t-1's vectors are read on screen
     assert torch.allclose(flow2[inside][:, 0], torch.ones(1, 8, 6)) and torch.allclose(flow2[inside][:, 1],
                                                                                         torch.full((1, 8, 6), -2.0))
+
+
+def concatenated_forward(net: SuperResolutionNet, lr, motion, jitter):
+    """The network written plainly: zero-upsample, warp and fold every frame, concatenate, convolve."""
+    from volsr_core.sr.network import accumulated_flows, hr_stack
+
+    cfg = net.config
+    s, d, n = cfg.scale, cfg.fold, cfg.previous_frames
+    b, frames, c, h, w = lr.shape
+    feats = net.features(lr.reshape(b * frames, c, h, w)).reshape(b, frames, -1, h, w)
+    flows = accumulated_flows([upsample_motion(motion[:, k], s) for k in range(n)])
+    stack = hr_stack(feats, jitter, flows, s, d)
+    if n:
+        dd = d * d
+        weights = net.reweight(torch.cat([x[:, ch * dd:(ch + 1) * dd] for x in stack for ch in net.rgbd], 1))
+        stack = [stack[0]] + [stack[k] * weights[:, k - 1:k] for k in range(1, n + 1)]
+    out = torch.nn.functional.pixel_shuffle(net.reconstruct(torch.cat(stack, 1)), d)
+    return out + torch.nn.functional.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
+
+
+@pytest.mark.parametrize("variant, scale, previous, features", [
+    ("S", 4, 2, ("color", "depth", "max_rgba")), ("S", 2, 3, ("color", "alpha", "depth")),
+    ("M", 4, 1, ("color", "depth", "max_rgba")), ("S", 8, 0, ("color",))])
+def test_the_split_first_layers_equal_the_concatenated_network(variant, scale, previous, features):
+    net = SuperResolutionNet(variant_config(variant, scale, previous, features)).eval()
+    with torch.no_grad():
+        for p in net.parameters():  # break the symmetry of the default init: every weight matters
+            p.add_(torch.randn_like(p) * 0.05)
+        lr, motion, jitter = inputs(net.config, h=6, w=5)
+        assert torch.allclose(net(lr, motion, jitter), concatenated_forward(net, lr, motion, jitter), atol=1e-4)

@@ -135,14 +135,16 @@ class Reweighting(nn.Module):
 
     def __init__(self, in_channels: int, previous_frames: int, width: int = 32, first_kernel: int = 3):
         super().__init__()
-        self.net = nn.Sequential(
-            nn.Conv2d(in_channels, width, first_kernel, padding=first_kernel // 2), nn.ReLU(),
-            nn.Conv2d(width, width, 3, padding=1), nn.ReLU(),
-            nn.Conv2d(width, previous_frames, 3, padding=1),
-        )
+        self.first = nn.Conv2d(in_channels, width, first_kernel, padding=first_kernel // 2)
+        self.rest = nn.Sequential(nn.ReLU(), nn.Conv2d(width, width, 3, padding=1), nn.ReLU(),
+                                  nn.Conv2d(width, previous_frames, 3, padding=1))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return (torch.tanh(self.net(x)) + 1.0) * 5.0
+        return self.after_first(self.first(x))
+
+    def after_first(self, y: torch.Tensor) -> torch.Tensor:
+        """The weights from the first layer's output."""
+        return (torch.tanh(self.rest(y)) + 1.0) * 5.0
 
 
 class UNet(nn.Module):
@@ -151,8 +153,8 @@ class UNet(nn.Module):
     def __init__(self, in_channels: int, out_channels: int, widths: tuple[int, ...], first_kernel: int = 3):
         super().__init__()
         act = nn.LeakyReLU(0.1)
-        self.inp = nn.Sequential(nn.Conv2d(in_channels, widths[0], first_kernel, padding=first_kernel // 2), act,
-                                 nn.Conv2d(widths[0], widths[0], 3, padding=1), act)
+        self.first = nn.Conv2d(in_channels, widths[0], first_kernel, padding=first_kernel // 2)
+        self.inp = nn.Sequential(act, nn.Conv2d(widths[0], widths[0], 3, padding=1), act)
         self.down = nn.ModuleList(
             nn.Sequential(nn.Conv2d(widths[i], widths[i + 1], 3, padding=1), act) for i in range(len(widths) - 1))
         self.up = nn.ModuleList(
@@ -162,7 +164,11 @@ class UNet(nn.Module):
         self.out = nn.Conv2d(widths[0], out_channels, 3, padding=1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        skips = [self.inp(x)]
+        return self.after_first(self.first(x))
+
+    def after_first(self, y: torch.Tensor) -> torch.Tensor:
+        """The output from the first layer's output."""
+        skips = [self.inp(y)]
         for down in self.down:
             skips.append(down(F.max_pool2d(skips[-1], 2)))
         y = skips.pop()
@@ -195,17 +201,83 @@ class SuperResolutionNet(nn.Module):
         b, frames, c, h, w = lr.shape
         feats = self.features(lr.reshape(b * frames, c, h, w)).reshape(b, frames, -1, h, w)
         flows = accumulated_flows([upsample_motion(motion[:, k], s) for k in range(n)])
-        stack = (folded_stack if d == s else hr_stack)(feats, jitter, flows, s, d)
-        if n:
-            dd = d * d
-            rgbd = torch.cat([x[:, ch * dd:(ch + 1) * dd] for x in stack for ch in self.rgbd], dim=1)
-            weights = self.reweight(rgbd)  # (B, N, H/d, W/d)
-            stack = [stack[0]] + [stack[k] * weights[:, k - 1:k] for k in range(1, n + 1)]
-        out = self.reconstruct(torch.cat(stack, dim=1))
+        if d == 1:
+            stack = hr_stack(feats, jitter, flows, s, d)
+            weights = self.reweight(torch.cat([x[:, self.rgbd] for x in stack], 1)) if n else None
+            out = self.reconstruct(torch.cat([stack[0]] + [stack[k] * weights[:, k - 1:k] for k in range(1, n + 1)], 1))
+        else:
+            out = self._folded(feats, jitter, flows)
         if d > 1:
             out = F.pixel_shuffle(out, d)
         base = F.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
         return out + base
+
+    def _folded(self, feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor]) -> torch.Tensor:
+        """Reweighting and U-Net on the folded stack, exactly, without building the concatenation.
+
+        Their first layers are 1x1 convolutions, so over the concatenated frames they are the sum
+        of per-frame convolutions; a frame's reweighting factor, a per-pixel scalar, is applied
+        after its convolution (on 32 channels, not C*d*d); with fold == scale the current
+        frame's term applies the weights of its jitter slot to its LR features, since its folded
+        zero-upsampling is zero in every other slot.
+        """
+        cfg = self.config
+        s, d, n = cfg.scale, cfg.fold, cfg.previous_frames
+        dd, rgbd = d * d, self.rgbd
+        fast = d == s
+        if fast:
+            onehot = slot_onehot(jitter[:, 0], s)
+            previous = folded_previous(feats, jitter, flows, s)
+        else:
+            current, *previous = hr_stack(feats, jitter, flows, s, d)
+        block = feats.shape[2] * dd
+        w_u = self.reconstruct.first.weight[:, :, 0, 0]
+        y = self.reconstruct.first.bias.view(1, -1, 1, 1) + (
+            slot_conv1x1(feats[:, 0], w_u[:, :block], onehot) if fast else conv1x1(current, w_u[:, :block]))
+        if n:
+            w_r = self.reweight.first.weight[:, :, 0, 0]
+            r = len(rgbd) * dd
+            y_r = self.reweight.first.bias.view(1, -1, 1, 1) + (
+                slot_conv1x1(feats[:, 0, rgbd], w_r[:, :r], onehot) if fast
+                else conv1x1(torch.cat([current[:, ch * dd:(ch + 1) * dd] for ch in rgbd], 1), w_r[:, :r]))
+            for k, x in enumerate(previous, start=1):
+                if fast:
+                    y_r = y_r + pixelwise_conv1x1(x[..., rgbd], w_r[:, k * r:(k + 1) * r], feats.shape[3])
+                else:
+                    rgbd_k = torch.cat([x[:, ch * dd:(ch + 1) * dd] for ch in rgbd], 1)
+                    y_r = y_r + conv1x1(rgbd_k, w_r[:, k * r:(k + 1) * r])
+            weights = self.reweight.after_first(y_r)
+            for k, x in enumerate(previous, start=1):
+                w_k = w_u[:, k * block:(k + 1) * block]
+                term = pixelwise_conv1x1(x, w_k, feats.shape[3]) if fast else conv1x1(x, w_k)
+                y = y + weights[:, k - 1:k] * term
+        return self.reconstruct.after_first(y)
+
+
+def conv1x1(x: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    """A bias-free 1x1 convolution with an (out, in) weight matrix."""
+    return F.conv2d(x, weight[:, :, None, None])
+
+
+def pixelwise_conv1x1(x: torch.Tensor, weight: torch.Tensor, height: int) -> torch.Tensor:
+    """``conv1x1`` of the folded layout, from channels-last (B, h*w, s*s, C) samples: (B, out, h, w).
+
+    ``weight`` is (out, C*s*s) in folded channel order (c*s*s + slot); it is reordered to
+    (slot, c) so that one matrix product over each pixel's s*s*C values does it.
+    """
+    b, n, s2, c = x.shape
+    reordered = weight.reshape(weight.shape[0], c, s2).transpose(1, 2).reshape(weight.shape[0], s2 * c)
+    y = torch.matmul(x.reshape(b, n, s2 * c), reordered.t())  # (B, h*w, out)
+    return y.transpose(1, 2).reshape(b, weight.shape[0], height, n // height)
+
+
+def slot_conv1x1(x: torch.Tensor, weight: torch.Tensor, onehot: torch.Tensor) -> torch.Tensor:
+    """``conv1x1(zero_upsample_folded(x, ...), weight)`` from the LR ``x`` (B, C, h, w) and its slot.
+
+    ``weight`` is (out, C*s*s) in folded channel order (c*s*s + slot); ``onehot`` (B, s*s) the slot.
+    """
+    selected = torch.einsum("ocs,bs->boc", weight.reshape(weight.shape[0], x.shape[1], -1), onehot)
+    return torch.einsum("boc,bchw->bohw", selected, x)
 
 
 def accumulated_flows(hr_motion: list[torch.Tensor]) -> list[torch.Tensor]:
@@ -235,44 +307,62 @@ def hr_stack(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor
 
 def folded_stack(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor], scale: int,
                  fold: int) -> list[torch.Tensor]:
-    """:func:`hr_stack` for ``fold == scale``, computed without any HR feature tensor.
+    """:func:`hr_stack` for ``fold == scale``, computed without any HR feature tensor (see
+    :func:`folded_previous`)."""
+    b, _, c, h, w = feats.shape
+    previous = [g.reshape(b, h, w, scale * scale, c).permute(0, 4, 3, 1, 2).reshape(b, c * scale * scale, h, w)
+                for g in folded_previous(feats, jitter, flows, scale)]
+    return [zero_upsample_folded(feats[:, 0], jitter[:, 0], scale)] + previous
 
-    The current frame's zero-upsampled, folded features are its samples in their jitter slot.
-    A previous frame's: bilinearly sampling a zero-upsampled image at q meets at most one
-    sample per axis (samples lie ``scale`` >= 2 pixels apart), so it is that LR sample (nearest
-    lattice point) times the tent weight of its distance to q. The samples' channel vectors are
-    gathered as rows of a channels-last table, with q laid out in folded order.
+
+def folded_previous(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor],
+                    scale: int) -> list[torch.Tensor]:
+    """The previous frames of :func:`hr_stack` with ``fold == scale``, without HR tensors, channels last.
+
+    Each is (B, h*w, s*s, C): LR pixel, sub-pixel slot (dy*s + dx), channel. Bilinearly sampling
+    a zero-upsampled image at q meets at most one sample per axis (samples lie ``scale`` >= 2
+    pixels apart), so the warped value is that LR sample (the nearest lattice point) times the
+    tent weight of its distance to q; the samples' channel vectors are gathered as rows of a
+    channels-last table.
     """
     b, _, c, h, w = feats.shape
     s2 = scale * scale
-    out = [zero_upsample_folded(feats[:, 0], jitter[:, 0], scale)]
+    out = []
+
+    def by_pixel(hr: torch.Tensor) -> torch.Tensor:
+        """(B, H, W) -> (B, h*w, s*s): each LR pixel's s*s HR pixels, row-major."""
+        return hr.reshape(b, h, scale, w, scale).permute(0, 1, 3, 2, 4).reshape(b, h * w, s2)
+
     ys = torch.arange(h * scale, device=feats.device, dtype=feats.dtype).view(1, -1, 1)
     xs = torch.arange(w * scale, device=feats.device, dtype=feats.dtype).view(1, 1, -1)
-    first_row = (torch.arange(b, device=feats.device) * (h * w)).view(b, 1, 1, 1)
+    first_row = (torch.arange(b, device=feats.device) * (h * w)).view(b, 1, 1)
     for k in range(1, feats.shape[1]):
         flow = flows[k - 1]
-        q = F.pixel_unshuffle(torch.stack([xs + 0.5 + flow[:, 0], ys + 0.5 + flow[:, 1]], dim=1), scale)
-        qx, qy = q[:, :s2], q[:, s2:]  # (B, s*s, h, w): HR positions in frame t-k, folded order
+        qx, qy = by_pixel(xs + 0.5 + flow[:, 0]), by_pixel(ys + 0.5 + flow[:, 1])  # HR positions in frame t-k
         offset = torch.clamp(torch.floor(scale * (0.5 + jitter[:, k])), 0, scale - 1)
-        ox, oy = offset[:, 0].view(b, 1, 1, 1), offset[:, 1].view(b, 1, 1, 1)
+        ox, oy = offset[:, 0].view(b, 1, 1), offset[:, 1].view(b, 1, 1)
         ix = torch.round((qx - ox - 0.5) / scale)
         iy = torch.round((qy - oy - 0.5) / scale)
         inside = ((ix >= 0) & (ix <= w - 1) & (iy >= 0) & (iy <= h - 1)).to(feats.dtype)
         weight = inside * (F.relu(1.0 - torch.abs(qx - (scale * ix + ox + 0.5)))
                            * F.relu(1.0 - torch.abs(qy - (scale * iy + oy + 0.5))))
-        # gather whole channel vectors of the nearest LR samples (rows of a channels-last table)
         rows = (first_row + torch.clamp(iy, 0, h - 1).long() * w + torch.clamp(ix, 0, w - 1).long()).reshape(-1)
         table = feats[:, k].permute(0, 2, 3, 1).reshape(b * h * w, c)
-        picked = torch.index_select(table, 0, rows).reshape(b, s2 * h * w, c).transpose(1, 2)  # (B, C, s*s*h*w)
-        out.append((picked.reshape(b, c, s2, h, w) * weight.unsqueeze(1)).reshape(b, c * s2, h, w))
+        picked = torch.index_select(table, 0, rows).reshape(b, h * w, s2, c)
+        out.append(picked * weight.unsqueeze(-1))
     return out
+
+
+def slot_onehot(jitter: torch.Tensor, scale: int) -> torch.Tensor:
+    """(B, s*s) one-hot of the sub-pixel slot oy*s + ox that jitter (B, 2) puts each sample in."""
+    offset = torch.clamp(torch.floor(scale * (0.5 + jitter)), 0, scale - 1)
+    slot = offset[:, 1] * scale + offset[:, 0]
+    slots = torch.arange(scale * scale, device=jitter.device, dtype=jitter.dtype)
+    return (slots[None, :] == slot[:, None]).to(jitter.dtype)
 
 
 def zero_upsample_folded(x: torch.Tensor, jitter: torch.Tensor, scale: int) -> torch.Tensor:
     """``pixel_unshuffle(zero_upsample(x, jitter, scale), scale)`` without the HR tensor: (B, C*s*s, h, w)."""
     b, c, h, w = x.shape
-    offset = torch.clamp(torch.floor(scale * (0.5 + jitter)), 0, scale - 1)
-    slot = offset[:, 1] * scale + offset[:, 0]
-    slots = torch.arange(scale * scale, device=x.device, dtype=x.dtype)
-    onehot = (slots[None, :] == slot[:, None]).to(x.dtype)
+    onehot = slot_onehot(jitter, scale)
     return (x.unsqueeze(2) * onehot[:, None, :, None, None]).reshape(b, c * scale * scale, h, w)
