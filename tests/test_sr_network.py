@@ -81,13 +81,20 @@ def test_reweighting_lies_in_zero_to_ten():
 
 @pytest.mark.parametrize("scale", (2, 4, 8))
 def test_the_folded_fast_path_equals_zero_upsampling_warping_and_folding(scale):
-    from volsr_core.sr.network import accumulated_flows, folded_stack, hr_stack
+    from volsr_core.sr.network import accumulated_flows, folded_previous, hr_stack, zero_upsample_folded
+
+    def folded_stack(feats, jitter, flows, scale):
+        """The fast path's frames in hr_stack's folded layout (B, C*s*s, h, w)."""
+        b, _, c, h, w = feats.shape
+        previous = [g.reshape(b, h, w, scale * scale, c).permute(0, 4, 3, 1, 2).reshape(b, c * scale * scale, h, w)
+                    for g in folded_previous(feats, jitter, flows, scale)]
+        return [zero_upsample_folded(feats[:, 0], jitter[:, 0], scale)] + previous
 
     g = torch.Generator().manual_seed(scale)
     feats = torch.rand(2, 3, 5, 6, 7, generator=g)
     jitter = torch.rand(2, 3, 2, generator=g) - 0.5
     flows = accumulated_flows([upsample_motion(torch.randn(2, 2, 6, 7, generator=g) * 1.5, scale) for _ in range(2)])
-    fast = folded_stack(feats, jitter, flows, scale, scale)
+    fast = folded_stack(feats, jitter, flows, scale)
     slow = hr_stack(feats, jitter, flows, scale, scale)
     for a, b in zip(fast, slow):
         assert a.shape == b.shape

@@ -305,16 +305,6 @@ def hr_stack(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor
     return out
 
 
-def folded_stack(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor], scale: int,
-                 fold: int) -> list[torch.Tensor]:
-    """:func:`hr_stack` for ``fold == scale``, computed without any HR feature tensor (see
-    :func:`folded_previous`)."""
-    b, _, c, h, w = feats.shape
-    previous = [g.reshape(b, h, w, scale * scale, c).permute(0, 4, 3, 1, 2).reshape(b, c * scale * scale, h, w)
-                for g in folded_previous(feats, jitter, flows, scale)]
-    return [zero_upsample_folded(feats[:, 0], jitter[:, 0], scale)] + previous
-
-
 def folded_previous(feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor],
                     scale: int) -> list[torch.Tensor]:
     """The previous frames of :func:`hr_stack` with ``fold == scale``, without HR tensors, channels last.
