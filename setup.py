@@ -29,6 +29,7 @@ setup(
         "torch": ["torch>=2.2,<3", "scikit-image>=0.22", "matplotlib>=3.7"],
         "onnx": ["onnxruntime>=1.17", "onnx>=1.15"],
         "cuda": ["numba-cuda>=0.20"],
+        "video": ["imageio>=2.30", "imageio-ffmpeg>=0.4"],  # volsr upscale --video (MP4 through ffmpeg)
         "dev": ["pytest>=8", "pytest-xdist>=3", "scikit-image>=0.22", "matplotlib>=3.7", "numba-cuda>=0.20"],
     },
     entry_points={"console_scripts": ["volsr=volsr_core.cli:main"]},

@@ -9,7 +9,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from volsr_core.cli import main  # noqa: E402
-from volsr_core.sr.checkpoint import load_model, save_checkpoint, sha256  # noqa: E402
+from volsr_core.hashing import file_sha256  # noqa: E402
+from volsr_core.sr.checkpoint import load_model, save_checkpoint  # noqa: E402
 from volsr_core.sr.evaluation import METHODS, temporal_error  # noqa: E402
 from volsr_core.sr.network import NetworkConfig, SuperResolutionNet  # noqa: E402
 from volsr_core.errors import InputError  # noqa: E402
@@ -43,7 +44,7 @@ def test_eval_writes_the_report_for_every_method(tiny_sequences, tmp_path, capsy
 def test_model_files_load_only_when_they_are_what_they_claim(tmp_path):
     model = SuperResolutionNet(NetworkConfig(scale=2, previous_frames=1, fold=2, widths=(8, 12)))
     save_checkpoint(tmp_path / "m.pt", model, extra={"note": "test"})
-    loaded = load_model(tmp_path / "m.pt", expected_sha256=sha256(tmp_path / "m.pt"))
+    loaded = load_model(tmp_path / "m.pt", expected_sha256=file_sha256(tmp_path / "m.pt"))
     for a, b in zip(model.state_dict().values(), loaded.state_dict().values()):
         assert torch.equal(a, b)
     with pytest.raises(InputError, match="does not match"):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from volsr_core.sr import SequenceDataset
+from volsr_core.sr.dataset import SequenceDataset
 from volsr_core.temporal.dataset_config import read_config
 from volsr_core.temporal.jitter import halton_jitter
 from volsr_core.temporal.jitter import jitter_phases

@@ -24,15 +24,20 @@ def inputs(config: NetworkConfig, h: int = 8, w: int = 12, batch: int = 2):
     return lr, motion, jitter
 
 
-@pytest.mark.parametrize("scale, previous, variant", list(itertools.product((2, 4, 8, 16), range(4), "SML")))
-def test_output_shape_for_every_scale_history_and_variant(scale, previous, variant):
-    config = variant_config(variant, scale=scale, previous_frames=previous)
+@pytest.mark.parametrize("scale, previous, variant, recurrent",
+                         list(itertools.product((2, 4, 8, 16), range(4), "SML", (False, True))))
+def test_output_shape_for_every_scale_history_and_variant(scale, previous, variant, recurrent):
+    config = variant_config(variant, scale=scale, previous_frames=previous, recurrent=recurrent)
     net = SuperResolutionNet(config)
     lr, motion, jitter = inputs(config, h=4, w=6, batch=1)
     with torch.no_grad():
         out = net(lr, motion, jitter)
-    assert out.shape == (1, 3, 4 * scale, 6 * scale)
-    assert torch.isfinite(out).all()
+        assert out.shape == (1, 3, 4 * scale, 6 * scale)
+        assert torch.isfinite(out).all()
+        if recurrent:  # the first frame stands in the upscaled colour for the missing history
+            base = torch.nn.functional.interpolate(lr[:, 0, :3], scale_factor=scale, mode="bilinear")
+            assert torch.equal(net(lr, motion, jitter, base), out)
+            assert not torch.equal(net(lr, motion, jitter, torch.zeros_like(out)), out)
 
 
 @pytest.mark.parametrize("features", FEATURE_SETS)
@@ -115,7 +120,7 @@ def test_accumulated_flows_chain_the_frames_vectors():
                                                                                         torch.full((1, 8, 6), -2.0))
 
 
-def concatenated_forward(net: SuperResolutionNet, lr, motion, jitter):
+def concatenated_forward(net: SuperResolutionNet, lr, motion, jitter, history=None):
     """The network written plainly: zero-upsample, warp and fold every frame, concatenate, convolve."""
     from volsr_core.sr.network import accumulated_flows, hr_stack
 
@@ -125,21 +130,48 @@ def concatenated_forward(net: SuperResolutionNet, lr, motion, jitter):
     feats = net.features(lr.reshape(b * frames, c, h, w)).reshape(b, frames, -1, h, w)
     flows = accumulated_flows([upsample_motion(motion[:, k], s) for k in range(n)])
     stack = hr_stack(feats, jitter, flows, s, d)
-    if n:
-        dd = d * d
-        weights = net.reweight(torch.cat([x[:, ch * dd:(ch + 1) * dd] for x in stack for ch in net.rgbd], 1))
-        stack = [stack[0]] + [stack[k] * weights[:, k - 1:k] for k in range(1, n + 1)]
+    dd = d * d
+    rgbd = [x[:, ch * dd:(ch + 1) * dd] for x in stack for ch in net.rgbd]
+    base = torch.nn.functional.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
+    if cfg.taau_base:
+        base = history
+        stack.append(torch.nn.functional.pixel_unshuffle(history, d) if d > 1 else history)
+        rgbd.append(stack[-1])
+    if cfg.recurrent:
+        warped = backward_warp(history, upsample_motion(motion[:, 0], s))
+        stack.append(torch.nn.functional.pixel_unshuffle(warped, d) if d > 1 else warped)
+        rgbd.append(stack[-1])
+    if cfg.weighted_inputs:
+        weights = net.reweight(torch.cat(rgbd, 1))
+        stack = [stack[0]] + [stack[k] * weights[:, k - 1:k] for k in range(1, len(stack))]
     out = torch.nn.functional.pixel_shuffle(net.reconstruct(torch.cat(stack, 1)), d)
-    return out + torch.nn.functional.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
+    return out + base
 
 
-@pytest.mark.parametrize("variant, scale, previous, features", [
-    ("S", 4, 2, ("color", "depth", "max_rgba")), ("S", 2, 3, ("color", "alpha", "depth")),
-    ("M", 4, 1, ("color", "depth", "max_rgba")), ("S", 8, 0, ("color",))])
-def test_the_split_first_layers_equal_the_concatenated_network(variant, scale, previous, features):
-    net = SuperResolutionNet(variant_config(variant, scale, previous, features)).eval()
+@pytest.mark.parametrize("variant, scale, previous, features, recurrent, taau", [
+    ("S", 4, 2, ("color", "depth", "max_rgba"), False, False), ("S", 2, 3, ("color", "alpha", "depth"), False, False),
+    ("M", 4, 1, ("color", "depth", "max_rgba"), False, False), ("S", 8, 0, ("color",), False, False),
+    ("S", 4, 1, ("color", "depth", "max_rgba"), True, False), ("S", 4, 0, ("color", "depth"), True, False),
+    ("M", 4, 2, ("color", "depth", "max_rgba"), True, False), ("L", 4, 1, ("color", "depth"), True, False),
+    ("S", 4, 0, ("color", "depth", "max_rgba"), False, True), ("M", 4, 1, ("color", "depth"), False, True)])
+def test_the_split_first_layers_equal_the_concatenated_network(variant, scale, previous, features, recurrent, taau):
+    net = SuperResolutionNet(variant_config(variant, scale, previous, features, recurrent, taau)).eval()
     with torch.no_grad():
         for p in net.parameters():  # break the symmetry of the default init: every weight matters
             p.add_(torch.randn_like(p) * 0.05)
         lr, motion, jitter = inputs(net.config, h=6, w=5)
-        assert torch.allclose(net(lr, motion, jitter), concatenated_forward(net, lr, motion, jitter), atol=1e-4)
+        history = torch.rand(lr.shape[0], 3, 6 * scale, 5 * scale) if recurrent or taau else None
+        assert torch.allclose(net(lr, motion, jitter, history),
+                              concatenated_forward(net, lr, motion, jitter, history), atol=1e-4)
+
+
+def test_a_taau_based_network_starts_as_taau_and_refines_it():
+    net = SuperResolutionNet(variant_config("S", 4, 0, taau_base=True)).eval()
+    lr, motion, jitter = inputs(net.config)
+    taau = torch.rand(2, 3, 32, 48)
+    with torch.no_grad():
+        assert torch.equal(net(lr, motion, jitter, taau), taau), "a zero residual at initialisation"
+        net.reconstruct.out.bias.fill_(0.1)
+        assert torch.allclose(net(lr, motion, jitter, taau), taau + 0.1)
+    with pytest.raises(ValueError, match="either its previous output"):
+        variant_config("S", 4, 0, recurrent=True, taau_base=True)

@@ -21,13 +21,14 @@ from volsr_core.sr.checkpoint import load_checkpoint  # noqa: E402
 from volsr_core.sr.config import load_training_config  # noqa: E402
 from volsr_core.sr.training import Trainer  # noqa: E402
 
-def write_config(folder: Path, dataset: Path, **train) -> Path:
+def write_config(folder: Path, dataset: Path, recurrent: bool = False, **train) -> Path:
+    """A tiny config; ``recurrent`` trains the recurrent network (N = 0) unrolled over all 3 frames."""
     config = {
         "seed": 1, "out": str(folder / "run"),
-        "data": {"root": str(dataset), "scale": 4, "previous_frames": 2, "crop": 32},
-        "model": {"variant": "S", "widths": [8, 12]},
+        "data": {"root": str(dataset), "scale": 4, "previous_frames": 0 if recurrent else 2, "crop": 32},
+        "model": {"variant": "S", "widths": [8, 12], "recurrent": recurrent},
         "optim": {"lr": 3e-3, "warmup_steps": 5},
-        "train": {"steps": 8, "batch_size": 2, "checkpoint_every": 4, **train},
+        "train": {"steps": 8, "batch_size": 2, "checkpoint_every": 4, **({"unroll": 3} if recurrent else {}), **train},
     }
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "train.yaml"
@@ -53,10 +54,11 @@ def test_a_tiny_model_overfits_a_tiny_sequence(tiny_sequences, tmp_path):
     assert last <= first / 10
 
 
-def test_resume_gives_the_weights_of_an_uninterrupted_run(tiny_sequences, tmp_path):
-    straight = load_training_config(write_config(tmp_path / "a", tiny_sequences))
+@pytest.mark.parametrize("recurrent", [False, True])
+def test_resume_gives_the_weights_of_an_uninterrupted_run(tiny_sequences, tmp_path, recurrent):
+    straight = load_training_config(write_config(tmp_path / "a", tiny_sequences, recurrent))
     Trainer(straight, progress=False).run()
-    interrupted = load_training_config(write_config(tmp_path / "b", tiny_sequences))
+    interrupted = load_training_config(write_config(tmp_path / "b", tiny_sequences, recurrent))
     Trainer(interrupted, progress=False).run(until=4)
     assert load_checkpoint(tmp_path / "b" / "run" / "checkpoints" / "last.pt", trusted=True)["step"] == 4
     Trainer(interrupted, progress=False).run()  # a new process would do the same: resumes from last.pt

@@ -213,6 +213,207 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- volsr upscale --------------------------------------------------------------------------------
+AUTO_VARIANT_RULE = ("auto: the largest shipped variant (L > M > S) whose network time for one frame of --size "
+                     "(measured at start-up: one warm-up, then the median of 3 runs on zeros) is at most the time "
+                     "of one native full-size 1-spp render of the first camera of the first input, i.e. the "
+                     "network must be cheaper than rendering natively; S when none is")
+
+
+def cmd_upscale(args: argparse.Namespace) -> int:
+    from volsr_core.render import RayCaster
+    from volsr_core.runtime import batch
+    from volsr_core.runtime.engines import open_engine
+    from volsr_core.runtime.models import model_file
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.scene.camera_paths import read_camera_path
+    from volsr_core.scene.presets import get_preset, load_transfer_function
+
+    if args.reference_spp < 0 or args.fps <= 0:
+        raise InputError(None, "--reference-spp must be 0 (off) or more and --fps positive")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "exists and is not a folder")
+    inputs = batch.expand_inputs(args.inputs)
+    videos = batch.video_paths(args.video, [item.name for item in inputs])
+    if videos:
+        batch.require_video()
+    for path in {v.parent for v in videos.values()}:
+        if path.exists() and not path.is_dir():
+            raise InputError(path, "exists and is not a folder")
+    # what every input shares is checked once, before any rendering
+    if args.camera_path:
+        read_camera_path(args.camera_path)
+    if args.tf:
+        load_transfer_function(args.tf, name=args.tf_name)
+    elif args.preset:
+        get_preset(args.preset)
+    variant, model = args.variant, None
+    if args.model:
+        model = Path(args.model)
+    elif variant != "auto":
+        model = model_file(variant, args.scale)
+    if model is not None:
+        scale = open_engine(model, device=args.device).config.scale
+        if scale != args.scale:
+            raise InputError(model, f"the model upscales {scale}x, not {args.scale}x (--scale)")
+
+    summaries = []
+    for item in inputs:
+        summary = batch.InputSummary(item.name, item.source or "phantom")
+        summaries.append(summary)
+        try:
+            if item.error:
+                raise InputError(item.source, item.error)
+            volume = load_volume_argument(argparse.Namespace(volume=item.source, series=args.series,
+                                                             resample=args.resample))
+            tf = choose_transfer_function(volume, args.preset, args.tf, args.tf_name, args.range)
+            cameras = cameras_for(args, volume, n_default=24)
+            if model is None:  # --variant auto, decided once at the first input that loads
+                caster = RayCaster(volume, tf, sample_distance=args.sample_distance, background=args.background,
+                                   device=args.device)
+                variant, model = batch.auto_variant(caster, cameras[0], args.size, args.scale, device=args.device)
+            pipeline = Pipeline(volume, tf, model, scale=args.scale, size=args.size, variant=variant,
+                                device=args.device, sample_distance=args.sample_distance, background=args.background)
+            for path in videos.values():
+                path.parent.mkdir(parents=True, exist_ok=True)
+            batch.upscale_cameras(pipeline, cameras, out / item.name, video=videos.get(item.name), fps=args.fps,
+                                  side_by_side_panels=args.side_by_side, reference_spp=args.reference_spp,
+                                  summary=summary)
+        except Exception as err:  # one bad input must not stop the others; Ctrl-C still stops the batch
+            summary.error = (str(err) if isinstance(err, VolSRError)
+                             else f"{summary.source}: {type(err).__name__}: {' '.join(str(err).split())}")
+            print(f"volsr: error: {summary.error}", file=sys.stderr)
+    failed = sum(s.error is not None for s in summaries)
+    print(f"upscaled {len(summaries) - failed} of {len(summaries)} input(s) {args.scale}x"
+          + (f" with {Path(str(model)).name}" if model is not None else "") + (f", {failed} failed" if failed else ""))
+    for s in summaries:
+        print("  " + s.line())
+    return 1 if failed else 0
+
+
+def add_upscale_parser(sub) -> None:
+    up = sub.add_parser("upscale", help="render volumes at low resolution along a camera path and upscale them "
+                        "with the SR network: PNG frames, MP4, side-by-side comparisons",
+                        description="Render every INPUT at 1/--scale of --size along a camera path and upscale each "
+                        "frame with the SR network: DIR/<input name>/frame_NNNN.png (and --video). Exit status 1 "
+                        "when an input failed (the others still finish), 2 for bad arguments.")
+    up.add_argument("inputs", nargs="*", metavar="INPUT",
+                    help="DICOM folder (or a file in it), .nrrd, .nii[.gz], .mha/.mhd or .vti, or a .txt file listing "
+                    "them one per line (# comments; relative paths from the list's folder); none: the phantom")
+    up.add_argument("--series", metavar="UID",
+                    help="DICOM SeriesInstanceUID to load (default: the series with most slices)")
+    up.add_argument("--resample", action="store_true",
+                    help="resample DICOM slices with missing or uneven gaps to uniform spacing instead of refusing")
+    tf = up.add_mutually_exclusive_group()
+    tf.add_argument("--preset", help="shipped preset name; default CT-Phantom for the phantom, CT-Bone otherwise")
+    tf.add_argument("--tf", metavar="FILE", help="transfer function file: VolSR JSON, Slicer presets.xml or .vp")
+    up.add_argument("--tf-name", metavar="NAME", help="which entry of a presets file --tf names")
+    up.add_argument("--range", type=parse_range, default="auto", metavar="auto|none|LO,HI",
+                    help="place the transfer function's design range (as for volsr render) [auto]")
+    up.add_argument("--scale", type=int, default=4, help="upscaling factor of the model [4]")
+    up.add_argument("--size", type=parse_size, default=(1024, 1024), metavar="W[xH]", help="output size [1024]")
+    path = up.add_mutually_exclusive_group()
+    path.add_argument("--camera-path", metavar="FILE", help="camera path JSON (vtkCamera terms)")
+    path.add_argument("--orbit", type=int, metavar="N", help="N frames orbiting the volume (360 degrees) [24]")
+    up.add_argument("--elevation", type=float, default=0.0, metavar="DEG", help="elevation of the orbit, degrees [0]")
+    up.add_argument("--out", required=True, metavar="DIR", help="folder; frames go to DIR/<input name>/")
+    up.add_argument("--video", metavar="FILE.mp4|DIR", help="also write an H.264 MP4 (volsr[video]); several inputs: "
+                    "<input name>.mp4 beside FILE.mp4 or in DIR")
+    up.add_argument("--fps", type=float, default=24.0, help="frame rate of the MP4 [24]")
+    up.add_argument("--side-by-side", action="store_true",
+                    help="three labelled panels per frame: native full-size 1-spp render | bilinear upscaling of the "
+                    "LR frame (VTK's ImageSampleDistance) | VolSR")
+    up.add_argument("--reference-spp", type=int, default=0, metavar="N",
+                    help="also render each frame natively with N jittered samples per pixel and print the PSNR of "
+                    "VolSR and bilinear against it (slow) [0: off]")
+    up.add_argument("--model", metavar="FILE", help="model file, .onnx (onnxruntime) or .pt (PyTorch); default: the "
+                    "shipped model of --variant at --scale")
+    up.add_argument("--variant", choices=("S", "M", "L", "auto"), default="S",
+                    help="shipped model size [S]; " + AUTO_VARIANT_RULE)
+    up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+                    help="where rays are cast and the network runs [cpu]")
+    up.add_argument("--sample-distance", type=float, metavar="MM", help="ray step, mm [half the smallest spacing]")
+    up.add_argument("--background", type=lambda s: tuple(float(v) for v in s.split(",")), default=(0.0, 0.0, 0.0),
+                    metavar="R,G,B", help="background colour in [0, 1] [0,0,0]")
+    up.set_defaults(run=cmd_upscale)
+
+
+# -- volsr bench ----------------------------------------------------------------------------------
+def parse_int_list(text: str) -> list[int]:
+    """'2,4,8' -> [2, 4, 8]."""
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"expected at least one integer, got {text!r}")
+    return values
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from volsr_core.runtime import bench
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "exists and is not a folder")
+    results = bench.run_benchmark(
+        args.volumes, args.size, frames=args.frames, degrees=args.degrees, warmup=args.warmup,
+        reference_spp=args.reference_spp, spp=args.native_spp, factors=args.factors, scales=args.scales,
+        variants=[v.strip().upper() for v in args.variants.split(",") if v.strip()], models_dir=args.models_dir,
+        preset=args.preset, placement=args.range, threads=args.threads, device=args.device)
+    written = bench.write_outputs(results, out)
+    for scene, targets in results["targets"].items():
+        print(f"{scene}:")
+        for line in bench.target_lines(targets):
+            print("  " + line.replace("**", ""))
+    print(f"wrote {', '.join(p.name for p in written)} to {out}")
+    return 0
+
+
+def add_bench_parser(sub) -> None:
+    b = sub.add_parser("bench", help="quality against time: native, native + bilinear, TAAU and VolSR side by side "
+                       "(bench.json, bench.md, bench.png; docs/performance.md)",
+                       description="For each volume, orbit the camera --frames frames of --degrees each and render "
+                       "every frame with every method: native full size at each --spp; native at 1/factor size + "
+                       "bilinear upscaling for each --factors (VTK's ImageSampleDistance); TAAU at each --scales; "
+                       "VolSR (Pipeline, onnxruntime) for every model of --variants at --scales. PSNR and SSIM "
+                       "against a --reference-spp supersampled native rendering are averaged over the frames after "
+                       "--warmup warm-up frames; ms per frame are medians over the same frames. Also checks the "
+                       "targets of docs/performance.md.")
+    b.add_argument("volumes", nargs="*", metavar="VOLUME[:PRESET[:RANGE]]",
+                   help="volume files as volsr render takes them, each optionally with its preset and range (auto, "
+                   "none or LO,HI), e.g. CT_AVM.nii.gz:CT-AAA:0,446 LIDC2.mha:CT-Bone:0,255 bonsai.nii.gz:CT-Bone "
+                   "(VOLUME::RANGE keeps the default preset); 'phantom' or none: the built-in phantom")
+    b.add_argument("--preset", help="preset for volumes that name none; default CT-Phantom for the phantom, CT-Bone "
+                   "otherwise")
+    b.add_argument("--range", type=parse_range, default="auto", metavar="auto|none|LO,HI",
+                   help="range for volumes that name none (as for volsr render) [auto]")
+    b.add_argument("--size", type=parse_size, default=(512, 512), metavar="W[xH]",
+                   help="output size; divisible by every --scales [512]")
+    b.add_argument("--out", required=True, metavar="DIR", help="folder for bench.json, bench.md and bench.png")
+    b.add_argument("--frames", type=int, default=12, metavar="N", help="frames of the camera orbit [12]")
+    b.add_argument("--degrees", type=float, default=2.0, metavar="DEG", help="orbit step per frame, degrees [2]")
+    b.add_argument("--warmup", type=int, default=4, metavar="N",
+                   help="first frames left out of quality and time (history builds up, kernels compile) [4]")
+    b.add_argument("--reference-spp", type=int, default=16, metavar="N",
+                   help="jittered samples per pixel of the ground truth [16]")
+    b.add_argument("--spp", dest="native_spp", type=parse_int_list, default=[1, 2, 4], metavar="N,..",
+                   help="samples per pixel of the native full-size renderings [1,2,4]")
+    b.add_argument("--factors", type=parse_int_list, default=[2, 3, 4, 6, 8], metavar="F,..",
+                   help="size reductions for native + bilinear [2,3,4,6,8]")
+    b.add_argument("--scales", type=parse_int_list, default=[2, 4, 8], metavar="S,..",
+                   help="upscaling factors of TAAU and the VolSR models [2,4,8]")
+    b.add_argument("--variants", default="S,M,L", metavar="V,..", help="VolSR model variants [S,M,L]")
+    b.add_argument("--models-dir", metavar="DIR",
+                   help="folder of .onnx models (export_onnx) to use instead of the shipped ones; scale and variant "
+                   "come from each model's metadata")
+    b.add_argument("--threads", type=int, default=2, metavar="N", help="onnxruntime intra-op threads [2]")
+    b.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+                   help="where rays are cast and the network runs [cpu]")
+    b.set_defaults(run=cmd_bench)
+
+
 # -- entry point ----------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="volsr", description="Learned super-resolution for medical volume rendering.")
@@ -272,6 +473,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--split", default="test", choices=("train", "val", "test"), help="[test]")
     ev.add_argument("--out", default="out/eval", metavar="DIR", help="report folder [out/eval]")
     ev.set_defaults(run=cmd_eval)
+
+    add_upscale_parser(sub)
+    add_bench_parser(sub)
     return parser
 
 

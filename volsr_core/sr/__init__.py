@@ -1,4 +1,2 @@
-"""The torch layer: training data (and, later, the networks). Importing it needs torch."""
-from volsr_core.sr.dataset import SequenceDataset
-
-__all__ = ["SequenceDataset"]
+"""The torch layer: network, losses, data, training, evaluation. Its modules need torch, except
+:mod:`volsr_core.sr.network_config` (read by onnxruntime-only installs); nothing is imported here."""

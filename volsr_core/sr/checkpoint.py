@@ -6,7 +6,6 @@ A model file holds ``{"format": "volsr-model", "version": 1, "network": NetworkC
 """
 from __future__ import annotations
 
-import hashlib
 import os
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,7 @@ import torch
 
 from volsr_core.atomic import atomic_write
 from volsr_core.errors import InputError
+from volsr_core.hashing import file_sha256
 
 MODEL_FORMAT = "volsr-model"
 
@@ -73,15 +73,6 @@ def load_checkpoint(path: str | os.PathLike, trusted: bool = False) -> dict[str,
     return payload
 
 
-def sha256(path: str | os.PathLike) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def load_model(path: str | os.PathLike, expected_sha256: str | None = None) -> "torch.nn.Module":
     """A SuperResolutionNet from a model file (or a training checkpoint), weights only.
 
@@ -90,7 +81,7 @@ def load_model(path: str | os.PathLike, expected_sha256: str | None = None) -> "
     from volsr_core.sr.network import NetworkConfig, SuperResolutionNet
 
     if expected_sha256 is not None and Path(path).is_file():
-        actual = sha256(path)
+        actual = file_sha256(path)
         if actual != expected_sha256.lower():
             raise InputError(path, f"SHA-256 {actual[:16]}... does not match the expected {expected_sha256[:16]}...")
     payload = load_checkpoint(path, trusted=True)

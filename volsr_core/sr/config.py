@@ -16,9 +16,9 @@ DEFAULTS: dict[str, Any] = {
     "data": {"root": None, "scale": 4, "previous_frames": 2, "crop": 96,
              "features": ["color", "depth", "max_rgba"], "augment": True, "num_workers": 0,
              "val_crop": None},
-    "model": {"variant": "S", "fold": None, "widths": None},
+    "model": {"variant": "S", "fold": None, "widths": None, "recurrent": False, "taau_base": False},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "min_lr_ratio": 0.05},
-    "train": {"steps": 1000, "batch_size": 8, "checkpoint_every": 200, "validate_every": None,
+    "train": {"steps": 1000, "batch_size": 8, "unroll": 1, "checkpoint_every": 200, "validate_every": None,
               "amp": True, "max_val_samples": 64},
     "loss": {"charbonnier_eps": 1e-3, "ssim_weight": 0.0},
 }
@@ -57,7 +57,7 @@ def load_training_config(path: str | os.PathLike) -> dict[str, Any]:
         holder = config[section] if section else config
         holder[key] = str((source.parent / os.path.expandvars(str(holder[key]))).resolve())
     train = config["train"]
-    for key in ("steps", "batch_size", "checkpoint_every"):
+    for key in ("steps", "batch_size", "unroll", "checkpoint_every"):
         if not isinstance(train[key], int) or train[key] < 1:
             raise InputError(source, f"'train.{key}' must be a positive integer, got {train[key]!r}")
     return config

@@ -29,6 +29,12 @@ class SequenceDataset(Dataset):
       frame, LR pixels (dx, dy), +y down (docs/conventions.md; zero for frame 0 of a video);
     - ``jitter`` (N+1, 2): each frame's sub-pixel jitter (jx, jy), LR pixels, +y down;
     - ``hr`` (3, P, P): frame t's ground-truth colour;
+    - ``hr_sequence`` (T, 3, P, P), only when ``hr_frames`` T > 1: frames t, t-1, ..., t-T+1's
+      ground truth, for unrolling a recurrent network over T frames (``previous_frames`` must
+      then count the N frames each step sees plus T - 1);
+    - ``taau`` (3, P, P), only with ``taau=True``: the TAAU estimate of frame t
+      (:class:`~volsr_core.temporal.taau.TemporalUpsampler` run over the video from frame 0 on
+      the LR colour, motion and jitter; computed once per video and process, then kept);
     - ``video``, ``frame``: int64 scalars, the video's number and t (for debugging).
 
     Crops are aligned across scales: an LR origin (x0, y0) in LR pixels is drawn, and the HR crop
@@ -49,7 +55,7 @@ class SequenceDataset(Dataset):
 
     def __init__(self, root: str | os.PathLike, split: str = "train", scale: int = 4, previous_frames: int = 2,
                  crop: int | None = 128, features: Sequence[str] = ("color", "depth", "max_rgba"),
-                 augment: bool = True, seed: int | None = None):
+                 augment: bool = True, seed: int | None = None, hr_frames: int = 1, taau: bool = False):
         self.root = Path(root)
         manifest = _read_manifest(self.root / "manifest.json")
         if split not in SPLITS:
@@ -61,6 +67,13 @@ class SequenceDataset(Dataset):
             raise ValueError(f"crop ({crop} HR pixels) must be a positive multiple of the scale ({scale})")
         if previous_frames < 0:
             raise ValueError(f"previous_frames must be at least 0, got {previous_frames}")
+        if not 1 <= hr_frames <= previous_frames + 1:
+            raise ValueError(f"hr_frames must be 1..previous_frames + 1, got {hr_frames}")
+        self.hr_frames = int(hr_frames)
+        if taau and hr_frames > 1:
+            raise ValueError("taau estimates come for frame t only (hr_frames=1)")
+        self.taau = bool(taau)
+        self._taau: dict[int, np.ndarray] = {}
         self.split, self.scale, self.previous_frames = split, int(scale), int(previous_frames)
         self.crop, self.features, self.augment, self.seed = crop, tuple(features), bool(augment), seed
         self.videos = [v for v in manifest["videos"] if v["split"] == split]
@@ -118,19 +131,42 @@ class SequenceDataset(Dataset):
         lr = np.concatenate([_channels_last(h5[f"lr{s}/{name}"][frames, rows, cols]) for name in self.features], -1)
         motion = h5[f"lr{s}/motion"][frames, rows, cols]
         jitter = h5[f"lr{s}/jitter"][frames]
-        hr = h5["hr/color"][t, s * y0:s * (y0 + ph), s * x0:s * (x0 + pw)]
-        lr, motion, jitter = lr[::-1], motion[::-1].copy(), jitter[::-1].copy()  # index k = frame t-k
+        hr = h5["hr/color"][t - self.hr_frames + 1:t + 1, s * y0:s * (y0 + ph), s * x0:s * (x0 + pw)]
+        lr, motion, jitter, hr = lr[::-1], motion[::-1].copy(), jitter[::-1].copy(), hr[::-1]  # index k = frame t-k
         if hflip:
-            lr, motion, hr = lr[:, :, ::-1], motion[:, :, ::-1], hr[:, ::-1]
+            lr, motion, hr = lr[:, :, ::-1], motion[:, :, ::-1], hr[:, :, ::-1]
             motion[..., 0] *= -1
             jitter[:, 0] *= -1
         if vflip:
-            lr, motion, hr = lr[:, ::-1], motion[:, ::-1], hr[::-1]
+            lr, motion, hr = lr[:, ::-1], motion[:, ::-1], hr[:, ::-1]
             motion[..., 1] *= -1
             jitter[:, 1] *= -1
-        return {"lr": _tensor(lr.transpose(0, 3, 1, 2)), "motion": _tensor(motion.transpose(0, 3, 1, 2)),
-                "jitter": _tensor(jitter), "hr": _tensor(hr.transpose(2, 0, 1)),
+        hr = _tensor(hr.transpose(0, 3, 1, 2))
+        taau = None
+        if self.taau:
+            taau = self._taau_frames(video_index)[t, s * y0:s * (y0 + ph), s * x0:s * (x0 + pw)]
+            taau = taau[:, ::-1] if hflip else taau
+            taau = taau[::-1] if vflip else taau
+        item = {"lr": _tensor(lr.transpose(0, 3, 1, 2)), "motion": _tensor(motion.transpose(0, 3, 1, 2)),
+                "jitter": _tensor(jitter), "hr": hr[0],
                 "video": torch.tensor(int(self.videos[video_index]["id"][1:])), "frame": torch.tensor(t)}
+        if self.hr_frames > 1:
+            item["hr_sequence"] = hr
+        if taau is not None:
+            item["taau"] = _tensor(taau.transpose(2, 0, 1))
+        return item
+
+    def _taau_frames(self, video_index: int) -> np.ndarray:
+        """(T, H, W, 3) float32: TAAU over the whole video at this scale, computed on first use."""
+        if video_index not in self._taau:
+            from volsr_core.temporal.taau import TemporalUpsampler
+
+            h5, s = self._file(video_index), self.scale
+            colour, motion, jitter = (h5[f"lr{s}/{k}"][()].astype(np.float32) for k in ("color", "motion", "jitter"))
+            upsampler = TemporalUpsampler(s)
+            self._taau[video_index] = np.stack([upsampler(colour[t], motion[t], tuple(jitter[t]))
+                                                for t in range(len(colour))])
+        return self._taau[video_index]
 
     def _lr_size(self, video_index: int) -> tuple[int, int]:
         width, height = self.videos[video_index]["hr_size"]
@@ -149,7 +185,7 @@ class SequenceDataset(Dataset):
         return self._files[video_index]
 
     def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_files": {}}
+        return {**self.__dict__, "_files": {}, "_taau": {}}
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:

@@ -5,7 +5,9 @@ SSIM from scikit-image against the HR ground truth, and a temporal-stability err
 absolute difference between the output's and the ground truth's frame-to-frame change after
 backward-warping frame t-1 onto t with the (upsampled) motion vectors, over pixels whose
 reprojection stays on screen. Lower is steadier; 0 means the output flickers exactly as the
-ground truth changes. TAAU runs over each whole video from frame 0, as it would live.
+ground truth changes. TAAU runs over each whole video from frame 0, as it would live; a recurrent
+network runs over each video from frame N on, its first output without history; a TAAU-based
+network refines the same TAAU frames.
 """
 from __future__ import annotations
 
@@ -86,11 +88,16 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
         frames = VideoFrames(data.root / meta["file"], cfg.scale)
         methods = _baselines(frames, cfg.scale)
         network_out: dict[int, np.ndarray] = {}
+        history = None  # recurrent networks: the previous frame's output, from the video's first evaluated frame on
         for index in indices:
             item = data[index]
             t = int(item["frame"])
-            y = model(*(item[k][None] for k in ("lr", "motion", "jitter")))[0]
-            network_out[t] = np.clip(y.permute(1, 2, 0).numpy(), 0.0, 1.0)
+            inputs = [item[k][None] for k in ("lr", "motion", "jitter")]
+            if cfg.taau_base:
+                history = torch.from_numpy(np.ascontiguousarray(methods["TAAU"](t).transpose(2, 0, 1)))[None]
+            out = model(*inputs, history) if cfg.takes_history else model(*inputs)
+            history = out if cfg.recurrent else history
+            network_out[t] = np.clip(out[0].permute(1, 2, 0).numpy(), 0.0, 1.0)
         methods["VolSR"] = network_out.__getitem__
         ts = sorted(network_out)
         video: dict[str, Any] = {"volume": meta["volume"], "frames": ts}

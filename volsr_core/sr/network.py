@@ -13,6 +13,16 @@ Per frame (current t and N previous frames t-1..t-N, all at low resolution):
 5. **reconstruction**: a U-Net (after Hofmann et al.: conv + LeakyReLU(0.1) + max-pool
    encoders, nearest-upsampling decoders with concatenated skips) producing RGB.
 
+Beyond the paper, a network may take a ``history`` image (HR RGB) weighted by one more
+reweighting channel, which carries information from many more frames than N:
+
+- ``recurrent``: its own previous output, backward-warped to the current frame like a previous
+  frame (a learned counterpart of TAA's history);
+- ``taau_base``: the TAAU estimate of the current frame (:class:`~volsr_core.temporal.taau.
+  TemporalUpsampler`, already reprojected and clamped), which is also the base the output adds
+  its residual to instead of the bilinearly upscaled colour: the network starts from TAAU and
+  learns what TAAU gets wrong (blur, ghosting, disocclusions).
+
 Steps 4-5 run on the high-resolution stack *folded* by ``fold`` (pixel unshuffle): ``fold = 1``
 is the paper's network at full resolution (variant L); ``fold = scale`` (variant S) runs every
 convolution at the low resolution with the sub-pixel positions kept as channels, and unfolds
@@ -21,75 +31,20 @@ the output with a pixel shuffle. The output adds the bilinearly upscaled current
 
 Tensors: ``lr`` (B, N+1, C, h, w), index 0 the current frame; ``motion`` (B, N+1, 2, h, w) each
 frame's vectors to its own previous frame in LR pixels (docs/conventions.md); ``jitter``
-(B, N+1, 2) in LR pixels, +y down. Output (B, 3, h*scale, w*scale).
+(B, N+1, 2) in LR pixels, +y down; ``history`` (B, 3, H, W): the network's output for the
+previous frame (recurrent) or TAAU's output for this frame (taau_base); None stands in the
+bilinearly upscaled current colour (a recurrent network's first frame after a cut). Output
+(B, 3, H, W), H = h*scale, W = w*scale.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import field
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-FEATURE_CHANNELS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4}
-SCALES = (2, 4, 8, 16)
-
-
-@dataclass(frozen=True)
-class NetworkConfig:
-    """Everything that fixes a network's shape; saved with its weights."""
-
-    scale: int = 4
-    previous_frames: int = 2
-    features: tuple[str, ...] = ("color", "depth", "max_rgba")
-    fold: int = 4               # pixel-unshuffle factor for reweighting + U-Net (1 = full resolution)
-    widths: tuple[int, ...] = (32, 48, 64)  # U-Net channels per level, finest first
-    reweight_width: int = 32
-    feature_width: int = 32     # the residual block's hidden channels (paper: 32)
-
-    def __post_init__(self) -> None:
-        if self.scale not in SCALES:
-            raise ValueError(f"scale must be one of {SCALES}, got {self.scale}")
-        if not 0 <= self.previous_frames <= 3:
-            raise ValueError("previous_frames must be 0..3")
-        bad = [f for f in self.features if f not in FEATURE_CHANNELS]
-        if bad or "color" not in self.features:
-            raise ValueError(f"features must include 'color' and come from {tuple(FEATURE_CHANNELS)}, got {self.features}")
-        if self.fold < 1 or self.scale % self.fold:
-            raise ValueError(f"fold must divide the scale ({self.scale}), got {self.fold}")
-        object.__setattr__(self, "features", tuple(self.features))
-        object.__setattr__(self, "widths", tuple(self.widths))
-
-    @property
-    def in_channels(self) -> int:
-        return sum(FEATURE_CHANNELS[f] for f in self.features)
-
-    @property
-    def rgbd_channels(self) -> list[int]:
-        """Indices of colour (and depth, when present) in a frame's input channels."""
-        idx, offset = [], 0
-        for f in self.features:
-            if f in ("color", "depth"):
-                idx += list(range(offset, offset + FEATURE_CHANNELS[f]))
-            offset += FEATURE_CHANNELS[f]
-        return idx
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-def variant_config(variant: str, scale: int = 4, previous_frames: int = 2,
-                   features: tuple[str, ...] = ("color", "depth", "max_rgba")) -> NetworkConfig:
-    """The sized variants: S folds by the scale (all convolutions at LR), M by scale/2, L by 1."""
-    variant = variant.upper()
-    if variant == "S":
-        return NetworkConfig(scale, previous_frames, features, fold=scale, widths=(32, 48, 64))
-    if variant == "M":
-        return NetworkConfig(scale, previous_frames, features, fold=max(scale // 2, 1), widths=(32, 48, 64))
-    if variant == "L":
-        return NetworkConfig(scale, previous_frames, features, fold=max(scale // 4, 1), widths=(32, 64, 96))
-    raise ValueError(f"variant must be S, M or L, got {variant!r}")
-
+from volsr_core.sr.network_config import FEATURE_CHANNELS, SCALES, NetworkConfig, variant_config  # noqa: F401
 
 class FeatureBlock(nn.Module):
     """The paper's per-frame residual block; returns the inputs with 8 learned channels appended."""
@@ -131,13 +86,13 @@ def backward_warp(x: torch.Tensor, motion: torch.Tensor) -> torch.Tensor:
 
 
 class Reweighting(nn.Module):
-    """3 convolutions on the RGB-D of all frames -> one weight in [0, 10] per previous frame."""
+    """3 convolutions on the RGB-D of all frames -> one weight in [0, 10] per previous frame (and history)."""
 
-    def __init__(self, in_channels: int, previous_frames: int, width: int = 32, first_kernel: int = 3):
+    def __init__(self, in_channels: int, weights: int, width: int = 32, first_kernel: int = 3):
         super().__init__()
         self.first = nn.Conv2d(in_channels, width, first_kernel, padding=first_kernel // 2)
         self.rest = nn.Sequential(nn.ReLU(), nn.Conv2d(width, width, 3, padding=1), nn.ReLU(),
-                                  nn.Conv2d(width, previous_frames, 3, padding=1))
+                                  nn.Conv2d(width, weights, 3, padding=1))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.after_first(self.first(x))
@@ -180,39 +135,56 @@ class UNet(nn.Module):
 
 
 class SuperResolutionNet(nn.Module):
-    """The whole network; see the module docstring. ``forward(lr, motion, jitter) -> (B, 3, H, W)``."""
+    """The whole network; see the module docstring. ``forward(lr, motion, jitter[, history]) -> (B, 3, H, W)``."""
 
     def __init__(self, config: NetworkConfig = field(default_factory=NetworkConfig)):
         super().__init__()
         self.config = config
-        c, n, s, d = config.in_channels, config.previous_frames, config.scale, config.fold
+        c, n, d = config.in_channels, config.previous_frames, config.fold
         self.features = FeatureBlock(c, config.feature_width)
         frame_channels = c + 8
         self.rgbd = config.rgbd_channels
+        history = 3 if config.takes_history else 0
         # folded stacks hold d*d sub-pixels per channel: their first layer mixes them with a 1x1
         first = 1 if d > 1 else 3
-        if n:
-            self.reweight = Reweighting(len(self.rgbd) * (n + 1) * d * d, n, config.reweight_width, first)
-        self.reconstruct = UNet(frame_channels * (n + 1) * d * d, 3 * d * d, config.widths, first)
+        if config.weighted_inputs:
+            self.reweight = Reweighting((len(self.rgbd) * (n + 1) + history) * d * d, config.weighted_inputs,
+                                        config.reweight_width, first)
+        self.reconstruct = UNet((frame_channels * (n + 1) + history) * d * d, 3 * d * d, config.widths, first)
+        if config.taau_base:  # start as TAAU exactly: the residual is zero until training says otherwise
+            nn.init.zeros_(self.reconstruct.out.weight)
+            nn.init.zeros_(self.reconstruct.out.bias)
 
-    def forward(self, lr: torch.Tensor, motion: torch.Tensor, jitter: torch.Tensor) -> torch.Tensor:
+    def forward(self, lr: torch.Tensor, motion: torch.Tensor, jitter: torch.Tensor,
+                history: torch.Tensor | None = None) -> torch.Tensor:
         cfg = self.config
         s, d, n = cfg.scale, cfg.fold, cfg.previous_frames
         b, frames, c, h, w = lr.shape
         feats = self.features(lr.reshape(b * frames, c, h, w)).reshape(b, frames, -1, h, w)
-        flows = accumulated_flows([upsample_motion(motion[:, k], s) for k in range(n)])
-        if d == 1:
-            stack = hr_stack(feats, jitter, flows, s, d)
-            weights = self.reweight(torch.cat([x[:, self.rgbd] for x in stack], 1)) if n else None
-            out = self.reconstruct(torch.cat([stack[0]] + [stack[k] * weights[:, k - 1:k] for k in range(1, n + 1)], 1))
-        else:
-            out = self._folded(feats, jitter, flows)
-        if d > 1:
-            out = F.pixel_shuffle(out, d)
+        hr_motion = [upsample_motion(motion[:, k], s) for k in range(max(n, int(cfg.recurrent)))]
+        flows = accumulated_flows(hr_motion[:n])
         base = F.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
+        warped_history = None
+        if cfg.takes_history:
+            warped_history = base if history is None else torch.clamp(history, 0.0, 1.0)
+            if cfg.taau_base:
+                base = warped_history  # already this frame's: not warped
+            else:
+                warped_history = backward_warp(warped_history, hr_motion[0])
+            if d > 1:
+                warped_history = F.pixel_unshuffle(warped_history, d)
+        if d == 1:
+            stack = hr_stack(feats, jitter, flows, s, d) + ([warped_history] if cfg.takes_history else [])
+            rgbd = [x[:, self.rgbd] for x in stack[:n + 1]] + stack[n + 1:]
+            weights = self.reweight(torch.cat(rgbd, 1)) if cfg.weighted_inputs else None
+            out = self.reconstruct(torch.cat([stack[0]] + [stack[k] * weights[:, k - 1:k]
+                                                            for k in range(1, len(stack))], 1))
+        else:
+            out = F.pixel_shuffle(self._folded(feats, jitter, flows, warped_history), d)
         return out + base
 
-    def _folded(self, feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor]) -> torch.Tensor:
+    def _folded(self, feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor],
+                history: torch.Tensor | None) -> torch.Tensor:
         """Reweighting and U-Net on the folded stack, exactly, without building the concatenation.
 
         Their first layers are 1x1 convolutions, so over the concatenated frames they are the sum
@@ -234,7 +206,7 @@ class SuperResolutionNet(nn.Module):
         w_u = self.reconstruct.first.weight[:, :, 0, 0]
         y = self.reconstruct.first.bias.view(1, -1, 1, 1) + (
             slot_conv1x1(feats[:, 0], w_u[:, :block], onehot) if fast else conv1x1(current, w_u[:, :block]))
-        if n:
+        if cfg.weighted_inputs:
             w_r = self.reweight.first.weight[:, :, 0, 0]
             r = len(rgbd) * dd
             y_r = self.reweight.first.bias.view(1, -1, 1, 1) + (
@@ -246,11 +218,15 @@ class SuperResolutionNet(nn.Module):
                 else:
                     rgbd_k = torch.cat([x[:, ch * dd:(ch + 1) * dd] for ch in rgbd], 1)
                     y_r = y_r + conv1x1(rgbd_k, w_r[:, k * r:(k + 1) * r])
+            if history is not None:  # the folded warped history, after the frames' columns
+                y_r = y_r + conv1x1(history, w_r[:, (n + 1) * r:])
             weights = self.reweight.after_first(y_r)
             for k, x in enumerate(previous, start=1):
                 w_k = w_u[:, k * block:(k + 1) * block]
                 term = pixelwise_conv1x1(x, w_k, feats.shape[3]) if fast else conv1x1(x, w_k)
                 y = y + weights[:, k - 1:k] * term
+            if history is not None:
+                y = y + weights[:, n:n + 1] * conv1x1(history, w_u[:, (n + 1) * block:])
         return self.reconstruct.after_first(y)
 
 
@@ -356,3 +332,22 @@ def zero_upsample_folded(x: torch.Tensor, jitter: torch.Tensor, scale: int) -> t
     b, c, h, w = x.shape
     onehot = slot_onehot(jitter, scale)
     return (x.unsqueeze(2) * onehot[:, None, :, None, None]).reshape(b, c * scale * scale, h, w)
+
+
+def run_unrolled(model: nn.Module, lr: torch.Tensor, motion: torch.Tensor, jitter: torch.Tensor,
+                 steps: int, previous_frames: int, recurrent: bool) -> list[torch.Tensor]:
+    """Run a network over ``steps`` consecutive frames, oldest first, each output the next one's history.
+
+    ``lr``/``motion``/``jitter`` hold N + steps frames (index k = frame t-k, as for one call); the
+    step for frame t-i sees frames t-i .. t-i-N. Returns the outputs for t-steps+1 .. t. The first
+    step has no history (a cut); a non-recurrent network just runs once per frame. ``model`` may
+    be a DistributedDataParallel wrapper, hence the configuration passed apart.
+    """
+    outputs: list[torch.Tensor] = []
+    history = None
+    for i in reversed(range(steps)):
+        window = slice(i, i + previous_frames + 1)
+        args = (lr[:, window], motion[:, window], jitter[:, window])
+        history = model(*args, history) if recurrent else model(*args)
+        outputs.append(history)
+    return outputs

@@ -27,7 +27,7 @@ from volsr_core.sr.checkpoint import save_checkpoint, load_checkpoint
 from volsr_core.sr.dataset import SequenceDataset
 from volsr_core.sr.losses import ReconstructionLoss
 from volsr_core.sr.metrics import psnr_ssim
-from volsr_core.sr.network import NetworkConfig, SuperResolutionNet, variant_config
+from volsr_core.sr.network import NetworkConfig, SuperResolutionNet, run_unrolled, variant_config
 
 LOG_FIELDS = ["step", "epoch", "loss", "lr", "val_psnr", "val_ssim", "seconds"]
 
@@ -74,7 +74,8 @@ class StepBatches(Sampler):
 
 def build_model(config: dict[str, Any]) -> SuperResolutionNet:
     data, model = config["data"], config["model"]
-    net = variant_config(model["variant"], data["scale"], data["previous_frames"], tuple(data["features"]))
+    net = variant_config(model["variant"], data["scale"], data["previous_frames"], tuple(data["features"]),
+                         bool(model["recurrent"]), bool(model["taau_base"]))
     overrides = {k: (tuple(v) if isinstance(v, list) else v) for k, v in model.items()
                  if k in ("fold", "widths") and v is not None}
     if overrides:
@@ -104,10 +105,17 @@ class Trainer:
             torch.cuda.set_device(self.device)
         self.out = Path(config["out"])
         data = config["data"]
-        self.train_set = SequenceDataset(data["root"], "train", data["scale"], data["previous_frames"], data["crop"],
-                                         tuple(data["features"]), augment=data["augment"], seed=config["seed"])
-        self.val_set = SequenceDataset(data["root"], "val", data["scale"], data["previous_frames"],
-                                       data["val_crop"], tuple(data["features"]), augment=False, seed=config["seed"])
+        # a sample carries the frames of `unroll` steps: N previous frames for the oldest step, plus one per step
+        self.unroll = int(config["train"]["unroll"])
+        if config["model"]["taau_base"] and self.unroll > 1:
+            raise ValueError("a TAAU-based network trains on single frames: set train.unroll to 1")
+        frames = data["previous_frames"] + self.unroll - 1
+        self.train_set = SequenceDataset(data["root"], "train", data["scale"], frames, data["crop"],
+                                         tuple(data["features"]), augment=data["augment"], seed=config["seed"],
+                                         hr_frames=self.unroll, taau=bool(config["model"]["taau_base"]))
+        self.val_set = SequenceDataset(data["root"], "val", data["scale"], frames, data["val_crop"],
+                                       tuple(data["features"]), augment=False, seed=config["seed"],
+                                       taau=bool(config["model"]["taau_base"]))
         torch.manual_seed(config["seed"])
         self.model = build_model(config).to(self.device)
         optim = config["optim"]
@@ -188,15 +196,26 @@ class Trainer:
         return {"step": self.step, "best_psnr": self.best_psnr}
 
     def train_step(self, batch: dict[str, torch.Tensor]) -> float:
-        lr, motion, jitter, hr = (batch[k].to(self.device) for k in ("lr", "motion", "jitter", "hr"))
+        targets = batch["hr_sequence" if self.unroll > 1 else "hr"].to(self.device)
+        if self.unroll == 1:
+            targets = targets[:, None]
         self.optimizer.zero_grad(set_to_none=True)
         with torch.autocast(self.device.type, dtype=torch.float16, enabled=self.amp):
-            loss = self.loss(self.ddp(lr, motion, jitter), hr)
+            outputs = self.forward(self.ddp, batch)  # oldest first; targets index k = frame t-k
+            loss = sum(self.loss(out, targets[:, len(outputs) - 1 - i]) for i, out in enumerate(outputs)) / len(outputs)
         self.scaler.scale(loss).backward()
         self.scaler.step(self.optimizer)
         self.scaler.update()
         self.scheduler.step()
         return float(loss.detach())
+
+    def forward(self, model: torch.nn.Module, batch: dict[str, torch.Tensor]) -> list[torch.Tensor]:
+        """The outputs for the batch's last ``unroll`` frames, oldest first (recurrent: each feeds the next)."""
+        cfg = self.model.config
+        lr, motion, jitter = (batch[k].to(self.device) for k in ("lr", "motion", "jitter"))
+        if cfg.taau_base:
+            return [model(lr, motion, jitter, batch["taau"].to(self.device))]
+        return run_unrolled(model, lr, motion, jitter, self.unroll, cfg.previous_frames, cfg.recurrent)
 
     @torch.no_grad()
     def validate(self) -> dict[str, float]:
@@ -207,7 +226,7 @@ class Trainer:
         scores = []
         for i in picks:
             item = self.val_set[int(i)]
-            out = self.model(*(item[k][None].to(self.device) for k in ("lr", "motion", "jitter")))
+            out = self.forward(self.model, {k: v[None] for k, v in item.items()})[-1]
             scores.append(psnr_ssim(out[0].float().cpu().numpy(), item["hr"].numpy()))
         self.model.train()
         if not scores:

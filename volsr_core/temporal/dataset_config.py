@@ -26,7 +26,8 @@ GROUND_TRUTH_MODES = ("supersampled", "taa")
 PHANTOM = "phantom"
 PHANTOM_SHAPE = (128, 128, 128)
 TOP_KEYS = ("seed", "hr_size", "scales", "frames_per_video", "previous_frames", "ground_truth", "camera", "volumes")
-VOLUME_KEYS = ("name", "path", "phantom_shape", "transfer_function", "videos")
+VOLUME_KEYS = ("name", "path", "phantom_shape", "transfer_function", "videos", "split")
+SPLITS = ("train", "val", "test")
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 # camera keys: candidate_pool's (pool_size is its n) and smooth_random_path's, with their defaults
@@ -41,7 +42,8 @@ class VolumeSpec:
     """One ``volumes`` entry. ``source`` is the resolved file or folder (None for the phantom);
     ``transfer_function`` holds ``preset`` or ``file`` (resolved) + ``name``, and ``range``
     (None, ``"auto"`` or [lo, hi]); ``tf_definition`` is that function as loaded
-    (:meth:`TransferFunction.to_dict`, before it is placed on a range)."""
+    (:meth:`TransferFunction.to_dict`, before it is placed on a range). ``split`` puts every
+    video of the volume in one split (a held-out volume); None cuts them 80/10/10."""
 
     name: str
     path: str
@@ -50,13 +52,15 @@ class VolumeSpec:
     transfer_function: dict[str, Any]
     tf_definition: dict[str, Any]
     videos: int
+    split: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The entry as read, paths resolved (absolute)."""
         d: dict[str, Any] = {"name": self.name, "path": str(self.source) if self.source else PHANTOM}
         if self.phantom_shape is not None:
             d["phantom_shape"] = list(self.phantom_shape)
-        return {**d, "transfer_function": dict(self.transfer_function), "videos": self.videos}
+        d = {**d, "transfer_function": dict(self.transfer_function), "videos": self.videos}
+        return {**d, "split": self.split} if self.split else d
 
 
 @dataclass(frozen=True)
@@ -268,8 +272,11 @@ def _volume(check: _Checker, entry: Any, key: str) -> VolumeSpec:
             check.fail(f"{key}.phantom_shape", "only applies to path: phantom")
         phantom_shape = None
     tf, definition = _transfer_function(check, entry["transfer_function"], f"{key}.transfer_function")
+    split = entry.get("split")
+    if split is not None and split not in SPLITS:
+        check.fail(f"{key}.split", f"expected one of {', '.join(SPLITS)}, got {split!r}")
     return VolumeSpec(name=name, path=written, source=source, phantom_shape=phantom_shape, transfer_function=tf,
-                      tf_definition=definition, videos=check.integer(entry["videos"], f"{key}.videos", 1))
+                      tf_definition=definition, videos=check.integer(entry["videos"], f"{key}.videos", 1), split=split)
 
 
 def _transfer_function(check: _Checker, value: Any, key: str) -> tuple[dict[str, Any], dict[str, Any]]:

@@ -34,7 +34,7 @@ from volsr_core.scene.camera_paths import candidate_pool, random_start, smooth_r
 from volsr_core.scene.presets import place_on_volume
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
-from volsr_core.temporal.dataset_config import PHANTOM, DatasetConfig
+from volsr_core.temporal.dataset_config import PHANTOM, SPLITS, DatasetConfig
 from volsr_core.temporal.ground_truth import ground_truth_frames
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
 from volsr_core.temporal.store import (
@@ -43,7 +43,6 @@ from volsr_core.temporal.store import (
 )
 
 POOL_TAG, SPLIT_TAG, VIDEO_TAG = 1, 2, 3
-SPLITS = ("train", "val", "test")
 STALE_PART = re.compile(r"^\.v(\d{4,})\.(?:h5|json)(?:\..+)?\.part$")
 
 
@@ -93,7 +92,8 @@ def plan_videos(config: DatasetConfig) -> list[VideoPlan]:
     """Every video of the config, numbered globally in config order."""
     plans: list[VideoPlan] = []
     for vi, spec in enumerate(config.volumes):
-        splits = split_of_videos(spec.videos, rng_for(config.seed, SPLIT_TAG, vi))
+        splits = [spec.split] * spec.videos if spec.split else split_of_videos(spec.videos,
+                                                                                rng_for(config.seed, SPLIT_TAG, vi))
         plans += [VideoPlan(len(plans) + k, vi, k, splits[k], config.fingerprint(vi, k)) for k in range(spec.videos)]
     return plans
 

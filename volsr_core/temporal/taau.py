@@ -43,34 +43,70 @@ def _keys_cubic(d: np.ndarray, a: float) -> np.ndarray:
     return np.where(d <= 1.0, near, far)
 
 
-def _upscale_matrix(n: int, scale: int, cubic: bool, a: float) -> np.ndarray:
-    """(n * scale, n) interpolation matrix along one axis, edge pixels repeated.
+def _axis_taps(n_in: int, n_out: int, cubic: bool, a: float) -> tuple[np.ndarray, np.ndarray]:
+    """Input indices and weights, each (n_out, taps), along one axis, edge pixels repeated.
 
-    HR pixel X's centre lies at LR index-space position s = (X + 0.5) / scale - 0.5 (LR pixel
-    i's centre at i); it takes the 2 linear taps or the 4 Keys-cubic taps around s.
+    Output pixel X's centre lies at input index-space position s = (X + 0.5) * n_in / n_out - 0.5
+    (input pixel i's centre at i); it takes the 2 linear taps or the 4 Keys-cubic taps around s.
     """
-    s = (np.arange(n * scale) + 0.5) / scale - 0.5
+    s = (np.arange(n_out) + 0.5) * n_in / n_out - 0.5
     i0 = np.floor(s).astype(np.int64)
     offsets = np.arange(-1, 3) if cubic else np.arange(0, 2)
     d = np.abs(s[:, None] - (i0[:, None] + offsets))
     weights = _keys_cubic(d, a) if cubic else 1.0 - d
-    m = np.zeros((n * scale, n))
-    rows = np.repeat(np.arange(n * scale)[:, None], len(offsets), axis=1)
-    np.add.at(m, (rows, np.clip(i0[:, None] + offsets, 0, n - 1)), weights)
-    return m
+    return np.clip(i0[:, None] + offsets, 0, n_in - 1), weights.astype(np.float32)
+
+
+@numba.njit(fastmath=True, boundscheck=False, cache=True)
+def _resample_kernel(planes, rows, row_w, cols, col_w, out):
+    """out[Y, X] = sum over taps of row_w[Y, i] col_w[X, j] planes[rows[Y, i], cols[X, j]] (serial)."""
+    tall = np.zeros((out.shape[0], planes.shape[1], planes.shape[2]), dtype=np.float32)
+    for y in range(out.shape[0]):
+        for i in range(rows.shape[1]):
+            r, wr = rows[y, i], row_w[y, i]
+            for x in range(planes.shape[1]):
+                for c in range(planes.shape[2]):
+                    tall[y, x, c] += wr * planes[r, x, c]
+    for y in range(out.shape[0]):
+        for x in range(out.shape[1]):
+            for c in range(out.shape[2]):
+                acc = 0.0
+                for j in range(cols.shape[1]):
+                    acc += col_w[x, j] * tall[y, cols[x, j], c]
+                out[y, x, c] = acc
+
+
+def _resize(image: np.ndarray, height: int, width: int, cubic: bool, a: float = -0.5) -> np.ndarray:
+    """Separable resampling of an (h, w[, C]) image to (height, width[, C]): rows, then columns.
+
+    A serial loop rather than matrix products: numpy's multi-threaded BLAS competes with numba's
+    render threads for the cores (a 64² -> 128² product measured at 60-80 ms right after a render
+    on 2 cores, against 1 ms alone).
+    """
+    image = np.asarray(image, dtype=np.float32)
+    h, w = image.shape[:2]
+    planes = np.ascontiguousarray(image.reshape(h, w, -1))
+    out = np.empty((height, width, planes.shape[2]), dtype=np.float32)
+    _resample_kernel(planes, *_axis_taps(h, height, cubic, a), *_axis_taps(w, width, cubic, a), out)
+    return out.reshape((height, width) + image.shape[2:])
 
 
 def _upscale(lr: np.ndarray, scale: int, cubic: bool, a: float = -0.5) -> np.ndarray:
-    """Separable upscaling of an (h, w[, C]) image: the axis matrices applied to rows, then columns."""
+    """Upscaling of an (h, w[, C]) image by an integer ``scale``."""
     if scale < 1 or int(scale) != scale:
         raise ValueError(f"scale must be a positive integer, got {scale}")
-    image = np.asarray(lr, dtype=np.float32)
-    h, w = image.shape[:2]
-    rows = _upscale_matrix(h, int(scale), cubic, a).astype(np.float32)
-    cols = _upscale_matrix(w, int(scale), cubic, a).astype(np.float32)
-    planes = np.moveaxis(image.reshape(h, w, -1), -1, 0)  # (C, h, w)
-    out = np.moveaxis(rows @ planes @ cols.T, 0, -1)  # (H, W, C)
-    return np.ascontiguousarray(out).reshape((h * scale, w * scale) + image.shape[2:])
+    h, w = np.shape(lr)[:2]
+    return _resize(lr, h * int(scale), w * int(scale), cubic, a)
+
+
+def resize_bilinear(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Bilinear resampling of an (h, w[, C]) image to exactly ``width`` x ``height``, float32.
+
+    The image covers the same view at every size (as VTK stretches a reduced-size rendering over
+    the viewport); pixel-centre convention, edges repeated. At integer ratios it is
+    :func:`upscale_bilinear`.
+    """
+    return _resize(image, int(height), int(width), cubic=False)
 
 
 def upscale_bilinear(lr: np.ndarray, scale: int) -> np.ndarray:

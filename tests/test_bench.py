@@ -1,0 +1,172 @@
+"""`volsr bench`: quality against time on the phantom at a tiny size, the Pareto front, the targets."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from volsr_core.runtime.bench import (
+    check_targets, curve_psnr_at, parse_scene_spec, pareto_front,
+)
+from volsr_core.temporal.taau import resize_bilinear, upscale_bilinear
+
+SPP, FACTORS, SCALES = [1, 4], [2, 3, 4, 6, 8], [2, 4, 8]
+
+
+@pytest.fixture(scope="module")
+def bench_run(tmp_path_factory):
+    """One small run through the CLI: phantom, 64², 4 frames (1 warm-up), 8-spp reference, an
+    untrained S 4x recurrent model exported to a models folder."""
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("skimage")
+    pytest.importorskip("matplotlib")
+    from volsr_core.cli import main
+    from volsr_core.runtime.export import export_onnx
+    from volsr_core.sr.network import SuperResolutionNet, variant_config
+
+    root = tmp_path_factory.mktemp("bench")
+    models = root / "models"
+    models.mkdir()
+    torch.manual_seed(0)
+    export_onnx(SuperResolutionNet(variant_config("S", 4, 0, recurrent=True)), models / "tiny.onnx")
+    out = root / "out"
+    status = main(["bench", "--size", "64", "--frames", "4", "--warmup", "1", "--reference-spp", "8",
+                   "--spp", ",".join(map(str, SPP)), "--models-dir", str(models), "--out", str(out)])
+    assert status == 0
+    return out, json.loads((out / "bench.json").read_text())
+
+
+def by_label(results):
+    return {r["label"]: r for r in results["rows"]}
+
+
+def test_every_method_is_measured_with_finite_numbers(bench_run):
+    _, results = bench_run
+    rows = by_label(results)
+    expected = ({f"native {n} spp" for n in SPP} | {f"native 1/{f} size + bilinear" for f in FACTORS}
+                | {f"TAAU {s}x" for s in SCALES} | {"VolSR S 4x"})
+    assert set(rows) == expected
+    assert {r["scene"] for r in rows.values()} == {"phantom, CT-Phantom on -1024..3071 (auto)"}
+    for r in rows.values():
+        for key in ("ms_render", "ms_network", "ms_total", "psnr", "ssim"):
+            assert r[key] is not None and math.isfinite(r[key]), (r["label"], key)
+        assert r["ms_render"] > 0 and r["ms_total"] > 0 and 0 < r["ssim"] <= 1
+        assert len(r["psnr_frames"]) == 3  # 4 frames, 1 warm-up
+        assert (r["ms_network"] == 0) == (r["method"] == "native")
+    volsr = rows["VolSR S 4x"]  # scale and variant came from the ONNX metadata
+    assert (volsr["method"], volsr["variant"], volsr["scale"], volsr["model"]) == ("volsr", "S", 4, "tiny.onnx")
+    assert results["settings"]["onnxruntime_threads"] == 2 and results["settings"]["measured_frames"] == 3
+
+
+def test_quality_orders_as_expected(bench_run):
+    # the renderer is deterministic, so these hold whatever the machine's load
+    _, results = bench_run
+    psnr = {label: r["psnr"] for label, r in by_label(results).items()}
+    assert psnr["native 4 spp"] > psnr["native 1 spp"] + 2.0
+    assert psnr["native 1 spp"] > psnr["native 1/2 size + bilinear"] > psnr["native 1/8 size + bilinear"]
+    assert psnr["TAAU 2x"] > psnr["native 1/2 size + bilinear"]  # accumulating jittered frames beats one LR frame
+
+
+def test_reports_and_target_verdicts(bench_run):
+    out, results = bench_run
+    md = (out / "bench.md").read_text()
+    assert "## phantom, CT-Phantom" in md and "| VolSR S 4x |" in md and "| native 1 spp |" in md
+    assert "after 1 warm-up frames" in md and "8-spp" in md
+    assert "1. VolSR at 4x reaches at least native 1-spp PSNR" in md and "2. Every VolSR point lies above" in md
+    from PIL import Image
+
+    with Image.open(out / "bench.png") as png:
+        assert png.format == "PNG" and png.size[0] > 300
+    assert not list(out.glob(".*")), "no temporary files may remain"
+    assert results["targets"] == check_targets(results["rows"])
+    targets = results["targets"]["phantom, CT-Phantom on -1024..3071 (auto)"]
+    assert targets["fast_4x"]["met"] in (True, False) and targets["above_bilinear"]["met"] in (True, False)
+
+
+def test_pareto_front_on_hand_made_points():
+    times = [10, 20, 5, 30, 20, 40, 15, 40]
+    psnrs = [25, 30, 20, 29, 28, 35, 25, 35]
+    # 10/25 beats 15/25 (same PSNR, less time); 20/30 beats 30/29 and 20/28; the two 40/35 are equal
+    assert pareto_front(times, psnrs) == [2, 0, 1, 5, 7]
+    assert pareto_front([1.0], [1.0]) == [0]
+    assert pareto_front([], []) == []
+
+
+def test_curve_interpolates_linearly_in_time_and_holds_its_ends():
+    times, psnrs = [40.0, 10.0, 20.0], [30.0, 20.0, 22.0]  # any order
+    assert curve_psnr_at(times, psnrs, 15.0) == pytest.approx(21.0)
+    assert curve_psnr_at(times, psnrs, 30.0) == pytest.approx(26.0)
+    assert curve_psnr_at(times, psnrs, 5.0) == 20.0 and curve_psnr_at(times, psnrs, 50.0) == 30.0
+
+
+def row(method, label, ms, psnr, scale=1, spp=1):
+    return {"scene": "v", "method": method, "label": label, "ms_total": ms, "psnr": psnr, "scale": scale, "spp": spp}
+
+
+def test_targets_from_hand_made_rows():
+    base = [row("native", "native 1 spp", 90.0, 30.0), row("native", "native 4 spp", 360.0, 36.0, spp=4),
+            row("bilinear", "1/2", 30.0, 26.0, 2), row("bilinear", "1/4", 10.0, 22.0, 4)]
+    good = row("volsr", "VolSR S 4x", 25.0, 31.0, 4)
+    slow = row("volsr", "VolSR L 4x", 40.0, 33.0, 4)
+    weak = row("volsr", "VolSR S 8x", 20.0, 24.0, 8)  # curve at 20 ms: 24 dB; not above it
+    t = check_targets(base + [good, slow])["v"]
+    assert t["fast_4x"]["met"] is True and t["fast_4x"]["budget_ms"] == pytest.approx(30.0)
+    assert [p["met"] for p in t["fast_4x"]["points"]] == [True, False]  # L is too slow for the budget
+    assert t["above_bilinear"]["met"] is True
+    assert t["above_bilinear"]["points"][1]["curve_psnr"] == pytest.approx(30.0 - 4.0 * 50 / 60, abs=1e-3)
+    t = check_targets(base + [slow, weak])["v"]
+    assert t["fast_4x"]["met"] is False and t["above_bilinear"]["met"] is False
+    assert t["above_bilinear"]["points"][1]["margin_db"] == pytest.approx(0.0)
+    fast = row("volsr", "VolSR S 4x", 5.0, 25.0, 4)  # faster than the whole curve: compared with its end
+    p = check_targets(base + [fast])["v"]["above_bilinear"]["points"][0]
+    assert p["outside"] and p["curve_psnr"] == 22.0 and p["met"]
+    t = check_targets(base)["v"]
+    assert t["fast_4x"]["met"] is None and t["above_bilinear"]["met"] is None
+
+
+def test_scene_specs(tmp_path):
+    assert parse_scene_spec(None) == (None, None, None)
+    assert parse_scene_spec("phantom") == (None, None, None)
+    assert parse_scene_spec("phantom:CT-Bone") == (None, "CT-Bone", None)
+    assert parse_scene_spec("a/CT_AVM.nii.gz:CT-AAA:0,446") == ("a/CT_AVM.nii.gz", "CT-AAA", (0.0, 446.0))
+    assert parse_scene_spec("bonsai.nii.gz:CT-Bone") == ("bonsai.nii.gz", "CT-Bone", None)
+    assert parse_scene_spec("bonsai.nii.gz:CT-Bone:auto") == ("bonsai.nii.gz", "CT-Bone", "auto")
+    assert parse_scene_spec("LIDC2.mha:0,255") == ("LIDC2.mha", None, (0.0, 255.0))
+    assert parse_scene_spec("LIDC2.mha::-5.5,2e3") == ("LIDC2.mha", None, (-5.5, 2000.0))
+    odd = tmp_path / "scan:1.nrrd"
+    odd.write_bytes(b"")
+    assert parse_scene_spec(str(odd)) == (str(odd), None, None)
+    assert parse_scene_spec(f"{odd}:MR-Default") == (str(odd), "MR-Default", None)
+
+
+def test_resize_to_any_size_matches_bilinear_at_integer_ratios():
+    rng = np.random.default_rng(0)
+    lr = rng.random((6, 5, 3), dtype=np.float32)
+    assert np.allclose(resize_bilinear(lr, 20, 24), upscale_bilinear(lr, 4), atol=1e-6)
+    odd = resize_bilinear(lr, 16, 17)  # 5 -> 16 and 6 -> 17: not integer ratios
+    assert odd.shape == (17, 16, 3) and odd.dtype == np.float32
+
+    def taps(n_in, n_out, i):  # output pixel i samples input coordinate (i + 0.5) n_in / n_out - 0.5
+        s = (i + 0.5) * n_in / n_out - 0.5
+        f = math.floor(s)
+        return min(max(f, 0), n_in - 1), min(max(f + 1, 0), n_in - 1), s - f
+
+    for y, x in [(0, 0), (16, 15), (7, 3), (11, 12)]:
+        a, b, fy = taps(6, 17, y)
+        c, d, fx = taps(5, 16, x)
+        expected = ((1 - fy) * ((1 - fx) * lr[a, c] + fx * lr[a, d]) + fy * ((1 - fx) * lr[b, c] + fx * lr[b, d]))
+        assert np.allclose(odd[y, x], expected, atol=1e-6)
+    assert np.allclose(resize_bilinear(np.full((6, 5, 3), 0.25, np.float32), 16, 17), 0.25)
+    assert lr.min() <= odd.min() and odd.max() <= lr.max()
+    assert resize_bilinear(lr[..., 0], 10, 12).shape == (12, 10)
+
+
+def test_bad_settings_give_one_line_errors(tmp_path):
+    from volsr_core.cli import main
+
+    assert main(["bench", "--size", "60", "--scales", "8", "--out", str(tmp_path / "b")]) == 2
+    assert main(["bench", "--size", "64", "--spp", "16", "--out", str(tmp_path / "b")]) == 2
+    assert main(["bench", "--size", "64", "--frames", "2", "--warmup", "2", "--out", str(tmp_path / "b")]) == 2

@@ -1,0 +1,192 @@
+"""`volsr upscale` end to end on real files: PNG frames, MP4s, side-by-side panels, bad inputs among
+good ones, interrupted writes, and the --variant auto rule."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+pytest.importorskip("torch")
+pytest.importorskip("onnxruntime")
+imageio = pytest.importorskip("imageio.v2")
+pytest.importorskip("imageio_ffmpeg")
+
+from volsr_core.cli import build_parser, main  # noqa: E402
+from volsr_core.hashing import file_sha256  # noqa: E402
+from volsr_core.io import make_phantom  # noqa: E402
+from volsr_core.runtime import batch, models  # noqa: E402
+from volsr_core.runtime.export import export_onnx  # noqa: E402
+from volsr_core.sr.network import SuperResolutionNet, variant_config  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def model_s4(tmp_path_factory):
+    import torch
+
+    torch.manual_seed(0)
+    return export_onnx(SuperResolutionNet(variant_config("S", 4, 0, recurrent=True)),
+                       tmp_path_factory.mktemp("model") / "s4.onnx")
+
+
+@pytest.fixture(scope="module")
+def small_volume(tmp_path_factory):
+    """The phantom at 32^3 as a MetaImage file: a real volume file that loads fast."""
+    import SimpleITK as sitk
+
+    record = make_phantom(shape=(32, 32, 32))
+    image = sitk.GetImageFromArray(record.array)
+    image.SetSpacing(record.spacing)
+    image.SetOrigin(record.origin)
+    image.SetDirection(np.asarray(record.direction, dtype=float).ravel().tolist())
+    path = tmp_path_factory.mktemp("volumes") / "small.mha"
+    sitk.WriteImage(image, str(path))
+    return path
+
+
+def leftovers(folder):
+    """Temporary or partial files anywhere under ``folder``."""
+    return [p for p in folder.rglob("*") if p.name.startswith(".") or ".part" in p.name]
+
+
+def read_video(path):
+    reader = imageio.get_reader(path)
+    try:
+        return [np.asarray(f) for f in reader]
+    finally:
+        reader.close()
+
+
+def test_phantom_orbit_to_png_frames_and_mp4_with_psnr_summary(tmp_path, model_s4, capsys):
+    video = tmp_path / "movie.mp4"
+    code = main(["upscale", "--orbit", "3", "--size", "64", "--model", str(model_s4), "--out", str(tmp_path / "out"),
+                 "--video", str(video), "--reference-spp", "2"])
+    assert code == 0
+    pngs = sorted((tmp_path / "out" / "phantom").glob("*.png"))
+    assert [p.name for p in pngs] == ["frame_0000.png", "frame_0001.png", "frame_0002.png"]
+    images = [np.asarray(Image.open(p)) for p in pngs]
+    assert all(im.shape == (64, 64, 3) for im in images) and images[0].max() > 30
+    frames = read_video(video)
+    assert len(frames) == 3 and frames[0].shape == (64, 64, 3)
+    assert np.abs(frames[0].astype(float) - images[0]).mean() < 12  # the MP4 holds the same pictures
+    out = capsys.readouterr().out
+    assert "upscaled 1 of 1 input(s) 4x with s4.onnx" in out
+    line = next(line for line in out.splitlines() if line.strip().startswith("phantom:"))
+    assert "3 frames of 64x64 from 16x16" in line and "network" in line
+    assert "PSNR vs 2-spp native render" in line and "VolSR" in line and "bilinear" in line
+    assert not leftovers(tmp_path)
+
+
+def test_side_by_side_frames_are_three_panels_wide(tmp_path, model_s4):
+    code = main(["upscale", "--orbit", "2", "--size", "64x48", "--model", str(model_s4), "--side-by-side",
+                 "--out", str(tmp_path), "--video", str(tmp_path / "sbs.mp4")])
+    assert code == 0
+    png = np.asarray(Image.open(tmp_path / "phantom" / "frame_0001.png"))
+    assert png.shape == (48, 192, 3)
+    native, bilinear, volsr = png[:, :64], png[:, 64:128], png[:, 128:]
+    assert not np.array_equal(native, bilinear) and not np.array_equal(bilinear, volsr)
+    for panel in (native, bilinear, volsr):  # white label text on a black box in the top-left corner
+        corner = panel[:16, :40]
+        assert (corner.min(axis=-1) > 120).any() and np.all(corner == 0, axis=-1).any()
+    frames = read_video(tmp_path / "sbs.mp4")
+    assert len(frames) == 2 and frames[0].shape == (48, 192, 3)
+
+
+def test_dicom_folder(tmp_path, model_s4, headsq_dicom, capsys):
+    code = main(["upscale", str(headsq_dicom), "--orbit", "2", "--size", "48", "--model", str(model_s4),
+                 "--out", str(tmp_path), "--video", str(tmp_path / "videos")])
+    assert code == 0
+    pngs = sorted((tmp_path / "headsq_dicom").glob("frame_*.png"))
+    assert len(pngs) == 2 and np.asarray(Image.open(pngs[0])).shape == (48, 48, 3)
+    frames = read_video(tmp_path / "videos" / "headsq_dicom.mp4")
+    assert len(frames) == 2 and frames[0].shape == (48, 48, 3)
+    assert "headsq_dicom: 2 frames of 48x48 from 12x12" in capsys.readouterr().out
+
+
+def test_bad_inputs_are_reported_while_the_good_ones_finish(tmp_path, model_s4, small_volume, capsys):
+    bogus = tmp_path / "bogus.nrrd"
+    bogus.write_text("this is not a volume\n")
+    listing = tmp_path / "list.txt"
+    listing.write_text(f"# volumes\n{small_volume}\nmissing.nii.gz\n\nbogus.nrrd\n")
+    code = main(["upscale", str(listing), str(small_volume), "--orbit", "2", "--size", "32", "--model", str(model_s4),
+                 "--out", str(tmp_path / "out"), "--video", str(tmp_path / "out" / "all.mp4")])
+    assert code == 1
+    captured = capsys.readouterr()
+    errors = [line for line in captured.err.splitlines() if line.startswith("volsr: error:")]
+    assert len(errors) == 2
+    assert errors[0] == f"volsr: error: {tmp_path / 'missing.nii.gz'}: no such file or folder"
+    assert errors[1].startswith(f"volsr: error: {bogus}: content does not look like a NRRD file")
+    assert "upscaled 2 of 4 input(s) 4x with s4.onnx, 2 failed" in captured.out
+    assert "missing: FAILED" in captured.out and "bogus: FAILED" in captured.out
+    for name in ("small", "small_2"):  # the same file twice: two names
+        assert len(list((tmp_path / "out" / name).glob("frame_*.png"))) == 2
+        assert len(read_video(tmp_path / "out" / f"{name}.mp4")) == 2
+    assert sorted(p.name for p in (tmp_path / "out").glob("*.mp4")) == ["small.mp4", "small_2.mp4"]
+    assert not leftovers(tmp_path)
+
+
+def test_bad_arguments_exit_2_with_one_line(tmp_path, model_s4, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["upscale", "--model", str(tmp_path / "none.onnx"), "--out", str(tmp_path)]) == 2
+    assert "none.onnx: cannot read the model" in capsys.readouterr().err
+    assert main(["upscale", "--model", str(model_s4), "--scale", "2", "--out", str(tmp_path)]) == 2
+    assert "upscales 4x, not 2x" in capsys.readouterr().err
+    assert main(["upscale", "--model", str(model_s4), "--out", str(blocker)]) == 2
+    assert main(["upscale", "--model", str(model_s4), "--out", str(tmp_path), "--video", str(blocker / "x.mp4")]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, RuntimeError])
+def test_an_interrupted_run_leaves_complete_files_only(tmp_path, model_s4, small_volume, stop):
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.scene import Camera, Volume, get_preset
+    from volsr_core.scene.camera_paths import orbit
+
+    volume = Volume.load(small_volume)
+    pipeline = Pipeline(volume, get_preset("CT-Bone").placed_on(*volume.percentiles()), model_s4, size=(32, 32))
+    cameras = orbit(Camera.framing(volume.bounds), 4)
+
+    def interrupt(i):
+        if i == 1:
+            raise stop("stopped after the second frame")
+
+    with pytest.raises(stop):
+        batch.upscale_cameras(pipeline, cameras, tmp_path / "frames", video=tmp_path / "movie.mp4", progress=False,
+                              side_by_side_panels=True, on_frame=interrupt)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["frame_0000.png", "frame_0001.png", "frames"]
+    assert all(np.asarray(Image.open(p)).shape == (32, 96, 3) for p in (tmp_path / "frames").glob("*.png"))
+
+
+def test_auto_variant_rule(capsys):
+    assert batch.choose_variant({"L": 90, "M": 40, "S": 10}, budget_ms=50) == "M"
+    assert batch.choose_variant({"L": 49, "M": 40, "S": 10}, budget_ms=50) == "L"
+    assert batch.choose_variant({"L": 90, "M": 60, "S": 55}, budget_ms=50) == "S"  # none fits: S
+    assert batch.choose_variant({"M": 60}, budget_ms=50) == "S"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["upscale", "--help"])
+    assert "the network must be cheaper than rendering natively" in " ".join(capsys.readouterr().out.split())
+
+
+def test_variant_auto_picks_from_the_shipped_registry(tmp_path, monkeypatch, model_s4, small_volume, capsys):
+    import shutil
+
+    import torch
+
+    torch.manual_seed(1)
+    shutil.copy(model_s4, tmp_path / "s4.onnx")
+    export_onnx(SuperResolutionNet(variant_config("M", 4, 0, recurrent=True)), tmp_path / "m4.onnx")
+    entries = [{"name": f"volsr-{v.lower()}4", "variant": v, "scale": 4, "files": {"onnx": f"{v.lower()}4.onnx"},
+                "sha256": {"onnx": file_sha256(tmp_path / f"{v.lower()}4.onnx")}} for v in ("S", "M")]
+    (tmp_path / "models.json").write_text(json.dumps({"models": entries}))
+    monkeypatch.setattr(models, "models_dir", lambda: tmp_path)
+    code = main(["upscale", str(small_volume), "--variant", "auto", "--orbit", "1", "--size", "32",
+                 "--out", str(tmp_path / "out")])
+    assert code == 0
+    out = capsys.readouterr().out
+    line = next(line for line in out.splitlines() if line.startswith("variant auto:"))
+    chosen = line.rsplit("-> ", 1)[1]
+    assert chosen in ("S", "M") and "budget (native 1-spp render)" in line and "M " in line
+    assert f"with {chosen.lower()}4.onnx" in out
+    assert (tmp_path / "out" / "small" / "frame_0000.png").is_file()

@@ -1,0 +1,144 @@
+"""Runtime: ONNX export round trip, engines, the stateful upscaler's history, the pipeline."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("onnxruntime")
+
+from volsr_core.errors import InputError  # noqa: E402
+from volsr_core.render.features import FeatureFrame  # noqa: E402
+from volsr_core.render.layout import OUT_CHANNELS  # noqa: E402
+from volsr_core.runtime.engines import OnnxEngine, TorchEngine, choose_providers  # noqa: E402
+from volsr_core.runtime.export import example_inputs, export_onnx  # noqa: E402
+from volsr_core.runtime.upscaler import StatefulUpscaler  # noqa: E402
+from volsr_core.scene.camera import Camera  # noqa: E402
+from volsr_core.sr.network import SuperResolutionNet, variant_config  # noqa: E402
+
+
+def perturbed(config):
+    """A network whose every weight matters (the default init leaves some paths near zero)."""
+    torch.manual_seed(0)
+    net = SuperResolutionNet(config).eval()
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(torch.randn_like(p) * 0.05)
+    return net
+
+
+@pytest.mark.parametrize("variant, scale, previous, recurrent, taau", [
+    ("S", 4, 2, False, False), ("S", 4, 0, True, False), ("M", 2, 1, True, False), ("S", 8, 1, False, False),
+    ("S", 4, 0, False, True)])
+def test_onnx_matches_torch_at_a_size_other_than_the_export_one(tmp_path, variant, scale, previous, recurrent, taau):
+    net = perturbed(variant_config(variant, scale, previous, recurrent=recurrent, taau_base=taau))
+    path = export_onnx(net, tmp_path / "m.onnx", example_size=(8, 12))
+    engine = OnnxEngine(path, providers=["CPUExecutionProvider"])
+    assert engine.config == net.config
+    inputs = example_inputs(net.config, 13, 10, batch=2)
+    with torch.no_grad():
+        expected = net(*inputs).numpy()
+    got = engine(*(x.numpy() for x in inputs))
+    assert got.shape == (2, 3, 13 * scale, 10 * scale)
+    assert np.abs(got - expected).max() <= 1e-4
+    if recurrent or taau:  # no history given: both stand in the upscaled colour
+        with torch.no_grad():
+            first = net(*inputs[:3]).numpy()
+        assert np.abs(engine(*(x.numpy() for x in inputs[:3])) - first).max() <= 1e-4
+
+
+def test_provider_order_prefers_tensorrt_then_cuda_then_cpu():
+    assert choose_providers(["CPUExecutionProvider", "CUDAExecutionProvider", "TensorrtExecutionProvider"]) == [
+        "TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExecutionProvider"]
+    assert choose_providers(["CPUExecutionProvider"]) == ["CPUExecutionProvider"]
+
+
+def test_foreign_and_damaged_onnx_files_give_one_line_errors(tmp_path):
+    junk = tmp_path / "junk.onnx"
+    junk.write_bytes(b"not a model")
+    with pytest.raises(InputError, match="junk.onnx: not a loadable ONNX model"):
+        OnnxEngine(junk)
+    plain = tmp_path / "plain.onnx"
+    torch.onnx.export(torch.nn.Conv2d(1, 1, 1), (torch.zeros(1, 1, 2, 2),), str(plain), dynamo=False)
+    with pytest.raises(InputError, match="without VolSR metadata"):
+        OnnxEngine(plain)
+
+
+def feature_frame(rng, h=6, w=5, jitter=(0.1, -0.2), motion=0.0):
+    data = rng.random((h, w, OUT_CHANNELS), dtype=np.float32)
+    frame = FeatureFrame(data, Camera(), jitter=jitter)
+    frame.motion[...] = motion
+    return frame
+
+
+def test_upscaler_first_frame_repeats_it_as_its_own_still_history():
+    config = variant_config("S", 4, 2)
+    engine = TorchEngine(perturbed(config))
+    upscaler = StatefulUpscaler(engine)
+    frame = feature_frame(np.random.default_rng(0), motion=0.3)
+    out = upscaler.upscale(frame)
+    assert out.shape == (24, 20, 3) and out.min() >= 0 and out.max() <= 1
+    from volsr_core.runtime.upscaler import network_inputs
+
+    lr = np.repeat(network_inputs(frame, config.features)[None, None], 3, axis=1)
+    jitter = np.tile(np.float32(frame.jitter), (1, 3, 1))
+    expected = engine(lr, np.zeros((1, 3, 2, 6, 5), np.float32), jitter)
+    assert np.allclose(out, np.clip(expected[0].transpose(1, 2, 0), 0, 1), atol=1e-6)
+
+
+def test_upscaler_uses_history_and_resets_on_demand_on_size_change_and_on_jumps():
+    engine = TorchEngine(perturbed(variant_config("S", 4, 1, recurrent=True)))
+    rng = np.random.default_rng(1)
+    frames = [feature_frame(rng, jitter=(0.2 * k - 0.3, 0.1)) for k in range(3)]
+    upscaler = StatefulUpscaler(engine)
+    outs = [upscaler.upscale(f) for f in frames]
+    fresh = StatefulUpscaler(engine).upscale(frames[2])
+    assert not np.allclose(outs[2], fresh, atol=1e-4), "the third frame must depend on the history"
+    assert upscaler.resets == 0
+    upscaler.reset()
+    assert np.allclose(upscaler.upscale(frames[2]), fresh, atol=1e-6)
+    bigger = feature_frame(rng, h=7, w=9)
+    assert upscaler.upscale(bigger).shape == (28, 36, 3)
+    assert upscaler.last_reset_reason == "size changed" and upscaler.resets == 2
+    jump = feature_frame(rng, h=7, w=9, motion=40.0)
+    assert np.allclose(upscaler.upscale(jump), StatefulUpscaler(engine).upscale(jump), atol=1e-6)
+    assert upscaler.last_reset_reason in ("large motion", "motion leaves the screen")
+
+
+def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(tmp_path):
+    from volsr_core.io import make_phantom
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.scene import Volume, get_preset
+    from volsr_core.scene.camera_paths import orbit
+    from volsr_core.temporal.jitter import halton_jitter, jitter_phases
+
+    volume = Volume.from_record(make_phantom(shape=(48, 48, 48)))
+    model = export_onnx(perturbed(variant_config("S", 4, 1, recurrent=True)), tmp_path / "m.onnx")
+    pipeline = Pipeline(volume, get_preset("CT-Phantom"), model, scale=4, size=(66, 50))
+    assert pipeline.low_resolution_size == (17, 13)
+    cameras = orbit(Camera.framing(volume.bounds), 3, degrees=6.0)
+    images = [pipeline.render(c) for c in cameras]
+    assert all(im.shape == (50, 66, 3) and im.dtype == np.float32 for im in images)
+    assert set(pipeline.last_timings) == {"render_ms", "network_ms", "total_ms"}
+    lr = pipeline.last_low_resolution
+    assert lr.jitter == pytest.approx(halton_jitter(2, jitter_phases(4)))
+    assert np.abs(lr.motion).max() > 0.1, "frames after the first carry motion vectors"
+    assert images[0].std() > 0.01
+    pipeline.reset()
+    again = pipeline.render(cameras[2])
+    assert np.abs(pipeline.last_low_resolution.motion).max() == 0
+    assert not np.allclose(again, images[2], atol=1e-3)
+    with pytest.raises(ValueError, match="upscales 4x, not 2x"):
+        Pipeline(volume, get_preset("CT-Phantom"), model, scale=2)
+
+
+def test_a_taau_based_upscaler_runs_taau_and_starts_as_it():
+    from volsr_core.temporal.taau import TemporalUpsampler
+
+    engine = TorchEngine(SuperResolutionNet(variant_config("S", 4, 0, taau_base=True)))  # zero residual
+    upscaler, taau = StatefulUpscaler(engine), TemporalUpsampler(4)
+    rng = np.random.default_rng(2)
+    for k in range(3):
+        frame = feature_frame(rng, jitter=(0.2 * k - 0.3, 0.1), motion=0.0 if k == 0 else 0.4)
+        expected = taau(frame.color, np.asarray(frame.motion) * (k > 0), frame.jitter)
+        assert np.allclose(upscaler.upscale(frame), np.clip(expected, 0, 1), atol=1e-5)

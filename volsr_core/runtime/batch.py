@@ -1,0 +1,361 @@
+"""Batch render-and-upscale (``volsr upscale``): a camera path through a Pipeline to PNG frames and an MP4.
+
+- :func:`upscale_cameras` renders every camera with a :class:`~volsr_core.runtime.pipeline.Pipeline`
+  and writes ``frame_NNNN.png`` (and optionally one MP4), either the upscaled image or, with
+  ``side_by_side``, three labelled panels: a native full-size 1-spp render, the LR frame upscaled
+  bilinearly (what VTK's ``ImageSampleDistance`` does) and VolSR;
+- with ``reference_spp`` it also measures PSNR against an N-spp native render of every frame;
+- :func:`auto_variant` picks the largest shipped variant whose network time fits the frame budget
+  (:func:`choose_variant` is the rule).
+
+Every PNG and MP4 is written atomically (a temporary name in the same folder, then a rename), so
+an interrupted run leaves complete files or none.
+"""
+from __future__ import annotations
+
+import os
+import statistics
+import tempfile
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+from volsr_core.atomic import atomic_write
+from volsr_core.errors import VolSRError
+
+VARIANTS_LARGEST_FIRST = ("L", "M", "S")
+PANELS = ("native 1 spp", "bilinear", "VolSR")
+VIDEO_HINT = "install the video extra: pip install 'volsr[video]' (imageio, imageio-ffmpeg)"
+
+
+# -- inputs -----------------------------------------------------------------------------------------
+VOLUME_SUFFIXES = (".nii.gz", ".nii", ".nrrd", ".nhdr", ".mha", ".mhd", ".vti", ".dcm")
+
+
+@dataclass
+class BatchInput:
+    """One volume of a batch: its output name, its path (None: the built-in phantom), or why it cannot be read."""
+
+    name: str
+    source: str | None
+    error: str | None = None
+
+
+def input_name(source: str | None) -> str:
+    """The name of an input's outputs: the file or folder name without a volume suffix; 'phantom' for None."""
+    if source is None:
+        return "phantom"
+    name = Path(os.path.normpath(source)).name
+    for suffix in VOLUME_SUFFIXES:
+        if name.lower().endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)]
+    return name or "volume"
+
+
+def expand_inputs(items: Sequence[str]) -> list[BatchInput]:
+    """The volumes that INPUT arguments name, with unique output names.
+
+    A ``.txt`` file lists volumes one per line (blank lines and ``#`` comments skipped; relative
+    paths are taken from the list's folder). No items: the phantom. A list that cannot be read
+    becomes one input that fails with the reason.
+    """
+    sources: list[tuple[str | None, str | None]] = []
+    for item in items or [None]:
+        if item is not None and item.lower().endswith(".txt"):
+            try:
+                lines = Path(item).read_text(encoding="utf-8").splitlines()
+            except FileNotFoundError:
+                sources.append((item, "no such file"))
+                continue
+            except (OSError, UnicodeDecodeError) as err:
+                sources.append((item, f"cannot read the list ({getattr(err, 'strerror', None) or err})"))
+                continue
+            folder = Path(item).parent
+            listed = [line.strip() for line in lines]
+            listed = [line for line in listed if line and not line.startswith("#")]
+            if not listed:
+                sources.append((item, "the list names no volume"))
+            sources += [(str(folder / line) if not os.path.isabs(line) else line, None) for line in listed]
+        else:
+            sources.append((item, None))
+    inputs, taken = [], set()
+    for source, error in sources:
+        base = input_name(source)
+        name, k = base, 2
+        while name in taken:
+            name, k = f"{base}_{k}", k + 1
+        taken.add(name)
+        inputs.append(BatchInput(name, source, error))
+    return inputs
+
+
+def video_paths(video: str | os.PathLike | None, names: Sequence[str]) -> dict[str, Path]:
+    """Where each input's MP4 goes: ``video`` itself for one input and an ``.mp4`` name; otherwise
+    ``<name>.mp4`` in ``video``'s folder (an ``.mp4`` name) or in ``video`` (a folder)."""
+    if video is None:
+        return {}
+    video = Path(video)
+    if video.suffix.lower() == ".mp4":
+        if len(names) == 1:
+            return {names[0]: video}
+        return {name: video.parent / f"{name}.mp4" for name in names}
+    return {name: video / f"{name}.mp4" for name in names}
+
+
+# -- the --variant auto rule ------------------------------------------------------------------------
+def choose_variant(network_ms: Mapping[str, float], budget_ms: float, fallback: str = "S") -> str:
+    """The largest variant (L > M > S) whose network time per frame is at most ``budget_ms``.
+
+    ``network_ms`` maps the variants measured to their ms per frame; when none fits, ``fallback``.
+    """
+    for variant in VARIANTS_LARGEST_FIRST:
+        if variant in network_ms and network_ms[variant] <= budget_ms:
+            return variant
+    return fallback
+
+
+def network_ms(engine, low_resolution_size: tuple[int, int], repeats: int = 3) -> float:
+    """The engine's time for one frame, ms: one warm-up run, then the median of ``repeats`` runs on zeros."""
+    config = engine.config
+    w, h = low_resolution_size
+    frames = config.previous_frames + 1
+    lr = np.zeros((1, frames, config.in_channels, h, w), np.float32)
+    motion = np.zeros((1, frames, 2, h, w), np.float32)
+    jitter = np.zeros((1, frames, 2), np.float32)
+    history = np.zeros((1, 3, h * config.scale, w * config.scale), np.float32) if config.takes_history else None
+    engine(lr, motion, jitter, history)
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        engine(lr, motion, jitter, history)
+        times.append(1000 * (time.perf_counter() - started))
+    return statistics.median(times)
+
+
+def native_render_ms(caster, camera, size: tuple[int, int]) -> float:
+    """ms of one full-size 1-spp render of ``camera`` (after a small warm-up render that compiles the kernels)."""
+    caster.render(camera, 16, 16)
+    started = time.perf_counter()
+    caster.render(camera, size[0], size[1])
+    return 1000 * (time.perf_counter() - started)
+
+
+def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: str = "cpu",
+                 log: Callable[[str], None] = print) -> tuple[str, Path]:
+    """The shipped variant ``--variant auto`` takes, and its model file.
+
+    Budget: one native full-size 1-spp render of ``camera``. The shipped variants at ``scale``
+    are timed largest first (:func:`network_ms` on an LR frame of ``size / scale``) until one fits
+    (:func:`choose_variant`); the smallest shipped one (S) is the fallback.
+    """
+    from volsr_core.runtime.engines import open_engine
+    from volsr_core.runtime.models import find_model, model_file, shipped_models
+
+    shipped = {e["variant"] for e in shipped_models() if e["scale"] == scale}
+    candidates = [v for v in VARIANTS_LARGEST_FIRST if v in shipped]
+    if not candidates:
+        find_model("S", scale)  # raises the one-line error naming what is shipped
+    budget = native_render_ms(caster, camera, size)
+    lr_size = (-(-size[0] // scale), -(-size[1] // scale))
+    measured: dict[str, float] = {}
+    for variant in candidates:
+        engine = open_engine(model_file(variant, scale), device=device)
+        measured[variant] = network_ms(engine, lr_size)
+        if measured[variant] <= budget:
+            break
+    chosen = choose_variant(measured, budget, fallback=candidates[-1])
+    times = ", ".join(f"{v} {ms:.0f} ms" for v, ms in measured.items())
+    log(f"variant auto: network per {size[0]}x{size[1]} frame {times}; budget (native 1-spp render) "
+        f"{budget:.0f} ms -> {chosen}")
+    return chosen, model_file(chosen, scale)
+
+
+# -- atomic outputs ---------------------------------------------------------------------------------
+@contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """A temporary path beside ``path`` (same suffix, so writers that go by the extension work) for a
+    writer that needs a file name; renamed to ``path`` on success, deleted on any failure."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_png(path: Path, rgb8: np.ndarray) -> None:
+    from PIL import Image
+
+    with atomic_write(path) as fh:
+        Image.fromarray(rgb8).save(fh, format="PNG")
+
+
+def require_video() -> None:
+    """Raise a one-line VolSRError unless imageio and imageio-ffmpeg are installed."""
+    try:
+        import imageio  # noqa: F401
+        import imageio_ffmpeg  # noqa: F401
+    except ImportError as err:
+        raise VolSRError(f"writing MP4 needs {err.name}: {VIDEO_HINT}") from None
+
+
+@contextmanager
+def mp4_writer(path: str | os.PathLike, fps: float = 24.0):
+    """An imageio writer (``append_data(rgb8)``) for an H.264 MP4 at ``path``, written atomically."""
+    require_video()
+    import imageio.v2 as imageio
+
+    with atomic_path(path) as tmp:
+        # macro_block_size=2: H.264 4:2:0 needs even sizes; odd ones are padded by one pixel, not resized to x16
+        writer = imageio.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=8,
+                                    macro_block_size=2, ffmpeg_log_level="error")
+        try:
+            yield writer
+        finally:
+            writer.close()
+
+
+# -- frames -----------------------------------------------------------------------------------------
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(np.asarray(image) * 255.0), 0, 255).astype(np.uint8)
+
+
+def labelled(rgb8: np.ndarray, text: str) -> np.ndarray:
+    """``rgb8`` with ``text`` in its top-left corner, white on a dark box."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    image = Image.fromarray(rgb8)
+    size = max(8, min(28, rgb8.shape[0] // 20))
+    try:
+        font = ImageFont.load_default(size=size)
+    except (TypeError, OSError, ImportError):  # Pillow without FreeType: the fixed bitmap font
+        font = ImageFont.load_default()
+    draw = ImageDraw.Draw(image)
+    margin = max(2, size // 3)
+    left, top, right, bottom = draw.textbbox((margin, margin), text, font=font)
+    draw.rectangle((left - margin // 2, top - margin // 2, right + margin // 2, bottom + margin // 2), fill=(0, 0, 0))
+    draw.text((margin, margin), text, fill=(255, 255, 255), font=font)
+    return np.asarray(image)
+
+
+def side_by_side(panels: Sequence[tuple[str, np.ndarray]]) -> np.ndarray:
+    """The (label, float image) panels left to right, each labelled: (H, W * len(panels), 3) uint8."""
+    return np.concatenate([labelled(to_uint8(image), label) for label, image in panels], axis=1)
+
+
+# -- one input --------------------------------------------------------------------------------------
+@dataclass
+class InputSummary:
+    """What one input of a batch produced: timings per frame, PSNR per frame, files, or the error."""
+
+    name: str
+    source: str
+    frames: int = 0
+    size: tuple[int, int] = (0, 0)
+    low_resolution_size: tuple[int, int] = (0, 0)
+    timings: dict[str, list[float]] = field(default_factory=lambda: {"render_ms": [], "network_ms": [],
+                                                                     "total_ms": []})
+    psnr: dict[str, list[float]] = field(default_factory=dict)   # method -> dB per frame
+    reference_spp: int = 0
+    outputs: list[Path] = field(default_factory=list)
+    error: str | None = None
+
+    def ms(self, stage: str) -> float:
+        """Median ms per frame of ``stage`` (render_ms, network_ms, total_ms); the first frame's
+        one-off costs (kernel compilation, session warm-up) do not move a median."""
+        values = self.timings[stage]
+        return statistics.median(values) if values else float("nan")
+
+    def line(self) -> str:
+        if self.error is not None:
+            done = f" after {self.frames} frame(s)" if self.frames else ""
+            return f"{self.name}: FAILED{done}: {self.error}"
+        (w, h), (lw, lh) = self.size, self.low_resolution_size
+        text = (f"{self.name}: {self.frames} frames of {w}x{h} from {lw}x{lh}; ms per frame (median): "
+                f"LR render {self.ms('render_ms'):.1f}, network {self.ms('network_ms'):.1f}, "
+                f"total {self.ms('total_ms'):.1f}")
+        if self.psnr:
+            scores = ", ".join(f"{m} {np.mean(v):.2f} dB" for m, v in self.psnr.items())
+            text += f"; PSNR vs {self.reference_spp}-spp native render (mean): {scores}"
+        if self.outputs:
+            text += f"; wrote {self.outputs[0].parent}/" + "".join(f", {p}" for p in self.outputs if p.suffix == ".mp4")
+        return text
+
+
+def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, video: str | os.PathLike | None = None,
+                    fps: float = 24.0, side_by_side_panels: bool = False, reference_spp: int = 0,
+                    summary: InputSummary | None = None, progress: bool = True,
+                    on_frame: Callable[[int], None] | None = None) -> InputSummary:
+    """Render every camera through ``pipeline`` to ``out_dir/frame_NNNN.png`` (and ``video``, an MP4).
+
+    ``side_by_side_panels``: each frame shows native 1 spp | bilinear | VolSR, labelled.
+    ``reference_spp`` > 0: PSNR (skimage) of VolSR and bilinear (and native 1 spp when rendered)
+    against an N-spp native render of the same camera. ``on_frame(i)`` runs after frame i is
+    written (a progress hook; an exception from it stops the run like any other, and the MP4 is
+    then not written). Fills and returns ``summary``.
+    """
+    from tqdm import tqdm
+
+    from volsr_core.temporal.supersample import render_supersampled
+    from volsr_core.temporal.taau import upscale_bilinear
+
+    if reference_spp:
+        from skimage.metrics import peak_signal_noise_ratio
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = summary or InputSummary(out_dir.name, "")
+    summary.size, summary.low_resolution_size = pipeline.size, pipeline.low_resolution_size
+    summary.reference_spp = int(reference_spp)
+    width, height = pipeline.size
+    caster = pipeline.caster  # the same volume, transfer function, step and background as the LR frames
+    writer = mp4_writer(video, fps) if video is not None else _nothing()
+    with writer as mp4, \
+            tqdm(total=len(cameras), desc=summary.name, unit="frame", disable=not progress, leave=False) as bar:
+        for i, camera in enumerate(cameras):
+            image = pipeline.render(camera)
+            for stage, ms in pipeline.last_timings.items():
+                summary.timings[stage].append(ms)
+            results = {"VolSR": image}
+            if side_by_side_panels or reference_spp:
+                lr_color = pipeline.last_low_resolution.color
+                results["bilinear"] = upscale_bilinear(lr_color, pipeline.scale)[:height, :width]
+            if side_by_side_panels:
+                results["native 1 spp"] = caster.render(camera, width, height).color
+            if reference_spp:
+                reference = render_supersampled(caster, camera, width, height, spp=reference_spp)
+                for method in ("VolSR", "bilinear", "native 1 spp"):
+                    if method in results:
+                        score = peak_signal_noise_ratio(reference, np.clip(results[method], 0, 1).astype(np.float32),
+                                                        data_range=1.0)
+                        summary.psnr.setdefault(method, []).append(float(score))
+            if side_by_side_panels:
+                frame = side_by_side([(label, results[label]) for label in PANELS])
+            else:
+                frame = to_uint8(image)
+            png = out_dir / f"frame_{i:04d}.png"
+            write_png(png, frame)
+            summary.outputs.append(png)
+            if mp4 is not None:
+                mp4.append_data(frame)
+            summary.frames = i + 1
+            bar.update(1)
+            if on_frame is not None:
+                on_frame(i)
+    if video is not None:
+        summary.outputs.append(Path(video))
+    return summary
+
+
+@contextmanager
+def _nothing():
+    yield None

@@ -1,0 +1,132 @@
+"""Inference engines with one call signature: onnxruntime (TensorRT / CUDA / CPU) and PyTorch.
+
+``engine(lr, motion, jitter, history=None) -> (B, 3, H, W)`` float32 numpy, inputs as the
+network takes them (numpy, float32; see :mod:`volsr_core.sr.network`). ``engine.config`` is the
+network's :class:`NetworkConfig`. The PyTorch engine is for training and debugging; the
+onnxruntime one is what hosts and the CLI use.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from volsr_core.errors import InputError
+
+PROVIDER_ORDER = ("TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExecutionProvider")
+
+
+def choose_providers(available: Sequence[str] | None = None) -> list[str]:
+    """The execution providers to use, best first: TensorRT, CUDA, CPU, those present."""
+    if available is None:
+        import onnxruntime as ort
+
+        available = ort.get_available_providers()
+    return [p for p in PROVIDER_ORDER if p in available] or ["CPUExecutionProvider"]
+
+
+def _network_config(mapping: dict[str, Any]):
+    from volsr_core.sr.network_config import NetworkConfig
+
+    return NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in mapping.items()})
+
+
+class OnnxEngine:
+    """An onnxruntime session over a VolSR ONNX file (:func:`~volsr_core.runtime.export.export_onnx`).
+
+    ``providers`` defaults to :func:`choose_providers`; ``fp16`` converts the graph to float16
+    (inputs and outputs stay float32) when a GPU provider runs it, and is ignored on the CPU;
+    ``threads`` sets onnxruntime's intra-op threads (default: its own choice).
+    """
+
+    def __init__(self, path: str | os.PathLike, providers: Sequence[str] | None = None, fp16: bool = False,
+                 threads: int | None = None):
+        import onnxruntime as ort
+
+        from volsr_core.runtime.export import METADATA_KEY
+
+        self.path = Path(path)
+        self.providers = list(providers) if providers else choose_providers()
+        options = ort.SessionOptions()
+        if threads:
+            options.intra_op_num_threads = int(threads)
+        try:
+            model: Any = self.path.read_bytes()
+        except OSError as err:
+            raise InputError(self.path, f"cannot read the model ({err.strerror})") from None
+        self.fp16 = bool(fp16) and self.providers[0] != "CPUExecutionProvider"
+        if self.fp16:
+            import onnx
+            from onnxruntime.transformers.float16 import convert_float_to_float16
+
+            model = convert_float_to_float16(onnx.load_from_string(model), keep_io_types=True).SerializeToString()
+        try:
+            self.session = ort.InferenceSession(model, options, providers=self.providers)
+        except Exception as err:  # onnxruntime raises its own exception types for damaged files
+            raise InputError(self.path, f"not a loadable ONNX model ({' '.join(str(err).split())[:160]})") from None
+        meta = self.session.get_modelmeta().custom_metadata_map
+        if METADATA_KEY not in meta:
+            raise InputError(self.path, f"an ONNX model without VolSR metadata ('{METADATA_KEY}')")
+        self.config = _network_config(json.loads(meta[METADATA_KEY]))
+        self.input_names = [i.name for i in self.session.get_inputs()]
+
+    def __call__(self, lr: np.ndarray, motion: np.ndarray, jitter: np.ndarray,
+                 history: np.ndarray | None = None) -> np.ndarray:
+        values = {"lr": lr, "motion": motion, "jitter": jitter}
+        if self.config.takes_history:
+            values["history"] = _default_history(lr, self.config.scale) if history is None else history
+        # the exporter drops inputs a configuration never reads (motion when N = 0 without recurrence)
+        feed = {name: np.ascontiguousarray(values[name], dtype=np.float32) for name in self.input_names}
+        return self.session.run(None, feed)[0]
+
+
+class TorchEngine:
+    """The PyTorch network behind the same call: numpy in, numpy out, no gradients."""
+
+    def __init__(self, model, device: str = "cpu"):
+        import torch
+
+        self.torch = torch
+        self.device = torch.device(device)
+        self.model = model.to(self.device).eval()
+        self.config = model.config
+        self.providers = [f"torch:{self.device}"]
+
+    def __call__(self, lr: np.ndarray, motion: np.ndarray, jitter: np.ndarray,
+                 history: np.ndarray | None = None) -> np.ndarray:
+        torch = self.torch
+        args = [torch.from_numpy(np.ascontiguousarray(v, dtype=np.float32)).to(self.device) for v in (lr, motion, jitter)]
+        if self.config.takes_history and history is not None:
+            args.append(torch.from_numpy(np.ascontiguousarray(history, dtype=np.float32)).to(self.device))
+        with torch.no_grad():
+            return self.model(*args).float().cpu().numpy()
+
+
+def _default_history(lr: np.ndarray, scale: int) -> np.ndarray:
+    """What the network stands in for a missing history: the current colour, bilinearly upscaled."""
+    from volsr_core.temporal.taau import upscale_bilinear
+
+    colour = np.moveaxis(lr[:, 0, :3], 1, -1)  # (B, h, w, 3)
+    return np.stack([np.moveaxis(upscale_bilinear(c, scale), -1, 0) for c in colour]).astype(np.float32)
+
+
+def open_engine(model: str | os.PathLike | Any, backend: str = "auto", device: str = "cpu", fp16: bool = False,
+                threads: int | None = None):
+    """An engine for a .onnx file (onnxruntime), a .pt model file or an ``nn.Module`` (PyTorch).
+
+    ``backend="auto"`` follows the file type; ``"torch"`` with an ``.onnx`` path is an error.
+    """
+    if not isinstance(model, (str, os.PathLike)):
+        return TorchEngine(model, device)
+    path = Path(model)
+    if path.suffix == ".onnx" and backend in ("auto", "onnxruntime"):
+        providers = None if device != "cpu" else ["CPUExecutionProvider"]
+        return OnnxEngine(path, providers=providers, fp16=fp16, threads=threads)
+    if path.suffix == ".onnx":
+        raise InputError(path, "an ONNX model runs in onnxruntime; give the .pt file for --backend torch")
+    from volsr_core.sr.checkpoint import load_model
+
+    return TorchEngine(load_model(path), device)

@@ -1,0 +1,97 @@
+"""StatefulUpscaler: one LR feature frame in, one HR frame out, the temporal history kept inside."""
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from volsr_core.render.features import FeatureFrame
+from volsr_core.temporal.taau import TemporalUpsampler
+
+BUFFERS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4}
+
+
+def network_inputs(frame: FeatureFrame, features: tuple[str, ...]) -> np.ndarray:
+    """(C, h, w) float32: the frame's buffers named by ``features``, stacked as the network takes them."""
+    planes = []
+    for name in features:
+        buffer = np.asarray(getattr(frame, name), dtype=np.float32)
+        planes.append(buffer[..., None] if buffer.ndim == 2 else buffer)
+    return np.ascontiguousarray(np.concatenate(planes, axis=-1).transpose(2, 0, 1))
+
+
+class StatefulUpscaler:
+    """Feeds an engine (:mod:`volsr_core.runtime.engines`) frame by frame, as a viewer renders them.
+
+    ``upscale(frame)`` takes one LR :class:`FeatureFrame` (rendered with jitter and the previous
+    camera, so its motion vectors point into the previous frame) and returns the (H, W, 3) float32
+    image in [0, 1], H = h * scale. It keeps the last N frames and, for recurrent networks, its
+    previous output; for TAAU-based networks it runs the :class:`TemporalUpsampler` whose
+    estimate the network refines. The history is dropped (the next frame starts afresh) when:
+
+    - fewer than N frames came before: the missing ones repeat the oldest frame held, with zero
+      motion (a still camera), so the first frame works;
+    - :meth:`reset` is called (a camera cut, a new volume or transfer function);
+    - the LR size changes (a resized window);
+    - the motion is implausibly large: the median vector longer than ``max_motion`` times the
+      frame's diagonal in LR pixels (a jump, not a drag), or more than ``max_offscreen`` of the
+      pixels reprojecting off screen.
+    """
+
+    def __init__(self, engine: Any, max_motion: float = 0.25, max_offscreen: float = 0.5):
+        self.engine = engine
+        self.config = engine.config
+        self.max_motion, self.max_offscreen = float(max_motion), float(max_offscreen)
+        self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=self.config.previous_frames + 1)
+        self.history: np.ndarray | None = None
+        self.taau = TemporalUpsampler(self.config.scale) if self.config.taau_base else None
+        self.resets = 0          # how many times the history was dropped
+        self.last_reset_reason = ""
+
+    def reset(self, reason: str = "asked") -> None:
+        """Forget every previous frame and output."""
+        self.frames.clear()
+        self.history = None
+        if self.taau is not None:
+            self.taau.reset()
+        self.resets += 1
+        self.last_reset_reason = reason
+
+    def _implausible(self, motion: np.ndarray) -> str:
+        h, w = motion.shape[:2]
+        length = np.hypot(motion[..., 0], motion[..., 1])
+        if np.median(length) > self.max_motion * np.hypot(h, w):
+            return "large motion"
+        ys, xs = np.mgrid[0:h, 0:w]
+        x, y = xs + 0.5 + motion[..., 0], ys + 0.5 + motion[..., 1]
+        if np.mean((x < 0) | (x > w) | (y < 0) | (y > h)) > self.max_offscreen:
+            return "motion leaves the screen"
+        return ""
+
+    def upscale(self, frame: FeatureFrame) -> np.ndarray:
+        """The HR image for ``frame`` (see the class); float32 (H, W, 3) in [0, 1]."""
+        inputs = network_inputs(frame, self.config.features)
+        motion = np.ascontiguousarray(frame.motion, dtype=np.float32).transpose(2, 0, 1)
+        jitter = np.asarray(frame.jitter, dtype=np.float32)
+        if self.frames:
+            reason = "size changed" if self.frames[0][0].shape != inputs.shape else self._implausible(frame.motion)
+            if reason:
+                self.reset(reason)
+        if not self.frames:
+            motion = np.zeros_like(motion)  # nothing to warp from: the motion points into no frame we hold
+        self.frames.appendleft((inputs, motion, jitter))
+        held = list(self.frames)
+        oldest = held[-1]
+        while len(held) < self.config.previous_frames + 1:
+            held.append((oldest[0], np.zeros_like(oldest[1]), oldest[2]))
+        lr = np.stack([f[0] for f in held])[None]
+        vectors = np.stack([f[1] for f in held])[None]
+        jitters = np.stack([f[2] for f in held])[None]
+        if self.taau is not None:  # TAAU's estimate of this frame (its vectors zero after a reset, as above)
+            estimate = self.taau(frame.color, motion.transpose(1, 2, 0), tuple(jitter))
+            self.history = np.ascontiguousarray(estimate.transpose(2, 0, 1)[None])
+        out = self.engine(lr, vectors, jitters, self.history)
+        if self.config.recurrent:
+            self.history = out
+        return np.clip(out[0].transpose(1, 2, 0), 0.0, 1.0)

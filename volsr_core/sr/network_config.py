@@ -1,0 +1,83 @@
+"""NetworkConfig and the sized variants: everything that fixes a network's shape, without PyTorch.
+
+Kept apart from :mod:`volsr_core.sr.network` so that onnxruntime-only installs (a ParaView or
+Slicer Python without torch) can read a model's configuration.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+FEATURE_CHANNELS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4}
+SCALES = (2, 4, 8, 16)
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Everything that fixes a network's shape; saved with its weights."""
+
+    scale: int = 4
+    previous_frames: int = 2
+    features: tuple[str, ...] = ("color", "depth", "max_rgba")
+    fold: int = 4               # pixel-unshuffle factor for reweighting + U-Net (1 = full resolution)
+    widths: tuple[int, ...] = (32, 48, 64)  # U-Net channels per level, finest first
+    reweight_width: int = 32
+    feature_width: int = 32     # the residual block's hidden channels (paper: 32)
+    recurrent: bool = False     # history = the previous output, warped to this frame (not in the paper)
+    taau_base: bool = False     # history = TAAU's estimate of this frame, and the base the output adds to
+
+    def __post_init__(self) -> None:
+        if self.scale not in SCALES:
+            raise ValueError(f"scale must be one of {SCALES}, got {self.scale}")
+        if not 0 <= self.previous_frames <= 3:
+            raise ValueError("previous_frames must be 0..3")
+        bad = [f for f in self.features if f not in FEATURE_CHANNELS]
+        if bad or "color" not in self.features:
+            raise ValueError(f"features must include 'color' and come from {tuple(FEATURE_CHANNELS)}, got {self.features}")
+        if self.fold < 1 or self.scale % self.fold:
+            raise ValueError(f"fold must divide the scale ({self.scale}), got {self.fold}")
+        if self.recurrent and self.taau_base:
+            raise ValueError("a network's history is either its previous output (recurrent) or TAAU's (taau_base)")
+        object.__setattr__(self, "features", tuple(self.features))
+        object.__setattr__(self, "widths", tuple(self.widths))
+
+    @property
+    def in_channels(self) -> int:
+        return sum(FEATURE_CHANNELS[f] for f in self.features)
+
+    @property
+    def takes_history(self) -> bool:
+        """Whether the network takes a ``history`` image (recurrent or TAAU-based)."""
+        return self.recurrent or self.taau_base
+
+    @property
+    def weighted_inputs(self) -> int:
+        """Inputs the reweighting network weighs: the previous frames, plus the history if any."""
+        return self.previous_frames + int(self.takes_history)
+
+    @property
+    def rgbd_channels(self) -> list[int]:
+        """Indices of colour (and depth, when present) in a frame's input channels."""
+        idx, offset = [], 0
+        for f in self.features:
+            if f in ("color", "depth"):
+                idx += list(range(offset, offset + FEATURE_CHANNELS[f]))
+            offset += FEATURE_CHANNELS[f]
+        return idx
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def variant_config(variant: str, scale: int = 4, previous_frames: int = 2,
+                   features: tuple[str, ...] = ("color", "depth", "max_rgba"),
+                   recurrent: bool = False, taau_base: bool = False) -> NetworkConfig:
+    """The sized variants: S folds by the scale (all convolutions at LR), M by scale/2, L by scale/4."""
+    variant = variant.upper()
+    history = {"recurrent": recurrent, "taau_base": taau_base}
+    if variant == "S":
+        return NetworkConfig(scale, previous_frames, features, fold=scale, widths=(32, 48, 64), **history)
+    if variant == "M":
+        return NetworkConfig(scale, previous_frames, features, fold=max(scale // 2, 1), widths=(32, 48, 64), **history)
+    if variant == "L":
+        return NetworkConfig(scale, previous_frames, features, fold=max(scale // 4, 1), widths=(32, 64, 96), **history)
+    raise ValueError(f"variant must be S, M or L, got {variant!r}")
