@@ -175,3 +175,17 @@ def test_a_taau_based_network_starts_as_taau_and_refines_it():
         assert torch.allclose(net(lr, motion, jitter, taau), taau + 0.1)
     with pytest.raises(ValueError, match="either its previous output"):
         variant_config("S", 4, 0, recurrent=True, taau_base=True)
+
+
+def test_the_temporal_loss_is_zero_when_the_output_changes_as_the_ground_truth_does():
+    from volsr_core.sr.losses import temporal_charbonnier
+
+    g = torch.Generator().manual_seed(3)
+    gt_prev, gt = torch.rand(1, 3, 16, 16, generator=g), torch.rand(1, 3, 16, 16, generator=g)
+    motion = torch.zeros(1, 2, 16, 16)
+    motion[:, 0] = 1.0
+    offset = torch.rand(1, 3, 1, 1, generator=g)
+    same = temporal_charbonnier(gt + offset, gt_prev + offset, gt, gt_prev, motion, eps=1e-6)
+    assert same < 1e-5, "a constant error does not flicker"
+    flicker = temporal_charbonnier(gt + offset, gt_prev, gt, gt_prev, motion, eps=1e-6)
+    assert flicker > 0.1

@@ -79,3 +79,14 @@ def test_torchrun_two_cpu_processes(tiny_sequences, tmp_path):
     state = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt", trusted=True)
     assert state["step"] == 4
     assert len(losses(tmp_path / "run")) == 4
+
+
+def test_a_taau_based_network_trains_unrolled_with_the_temporal_loss(tiny_sequences, tmp_path):
+    path = write_config(tmp_path, tiny_sequences, steps=6, unroll=2, validate_every=6)
+    config = load_training_config(path)
+    config["data"]["previous_frames"] = 0
+    config["model"]["taau_base"] = True
+    config["loss"]["temporal_weight"] = 0.5
+    result = Trainer(config, progress=False).run()
+    assert result["step"] == 6 and torch.isfinite(torch.tensor(losses(tmp_path / "run"))).all()
+    assert result["best_psnr"] > 10

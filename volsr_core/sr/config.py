@@ -20,7 +20,7 @@ DEFAULTS: dict[str, Any] = {
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "min_lr_ratio": 0.05},
     "train": {"steps": 1000, "batch_size": 8, "unroll": 1, "checkpoint_every": 200, "validate_every": None,
               "amp": True, "max_val_samples": 64},
-    "loss": {"charbonnier_eps": 1e-3, "ssim_weight": 0.0},
+    "loss": {"charbonnier_eps": 1e-3, "ssim_weight": 0.0, "temporal_weight": 0.0},
 }
 
 

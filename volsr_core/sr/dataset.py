@@ -32,9 +32,9 @@ class SequenceDataset(Dataset):
     - ``hr_sequence`` (T, 3, P, P), only when ``hr_frames`` T > 1: frames t, t-1, ..., t-T+1's
       ground truth, for unrolling a recurrent network over T frames (``previous_frames`` must
       then count the N frames each step sees plus T - 1);
-    - ``taau`` (3, P, P), only with ``taau=True``: the TAAU estimate of frame t
-      (:class:`~volsr_core.temporal.taau.TemporalUpsampler` run over the video from frame 0 on
-      the LR colour, motion and jitter; computed once per video and process, then kept);
+    - ``taau`` (T, 3, P, P), only with ``taau=True``: the TAAU estimates of the ``hr_frames``
+      frames t, t-1, ... (:class:`~volsr_core.temporal.taau.TemporalUpsampler` run over the video
+      from frame 0 on the LR colour, motion and jitter; computed once per video and process);
     - ``video``, ``frame``: int64 scalars, the video's number and t (for debugging).
 
     Crops are aligned across scales: an LR origin (x0, y0) in LR pixels is drawn, and the HR crop
@@ -70,8 +70,6 @@ class SequenceDataset(Dataset):
         if not 1 <= hr_frames <= previous_frames + 1:
             raise ValueError(f"hr_frames must be 1..previous_frames + 1, got {hr_frames}")
         self.hr_frames = int(hr_frames)
-        if taau and hr_frames > 1:
-            raise ValueError("taau estimates come for frame t only (hr_frames=1)")
         self.taau = bool(taau)
         self._taau: dict[int, np.ndarray] = {}
         self.split, self.scale, self.previous_frames = split, int(scale), int(previous_frames)
@@ -144,16 +142,17 @@ class SequenceDataset(Dataset):
         hr = _tensor(hr.transpose(0, 3, 1, 2))
         taau = None
         if self.taau:
-            taau = self._taau_frames(video_index)[t, s * y0:s * (y0 + ph), s * x0:s * (x0 + pw)]
-            taau = taau[:, ::-1] if hflip else taau
-            taau = taau[::-1] if vflip else taau
+            taau = self._taau_frames(video_index)[t - self.hr_frames + 1:t + 1, s * y0:s * (y0 + ph),
+                                                  s * x0:s * (x0 + pw)][::-1]
+            taau = taau[:, :, ::-1] if hflip else taau
+            taau = taau[:, ::-1] if vflip else taau
         item = {"lr": _tensor(lr.transpose(0, 3, 1, 2)), "motion": _tensor(motion.transpose(0, 3, 1, 2)),
                 "jitter": _tensor(jitter), "hr": hr[0],
                 "video": torch.tensor(int(self.videos[video_index]["id"][1:])), "frame": torch.tensor(t)}
         if self.hr_frames > 1:
             item["hr_sequence"] = hr
         if taau is not None:
-            item["taau"] = _tensor(taau.transpose(2, 0, 1))
+            item["taau"] = _tensor(taau.transpose(0, 3, 1, 2))
         return item
 
     def _taau_frames(self, video_index: int) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Losses: Charbonnier (the paper's), optionally plus an SSIM term."""
+"""Losses: Charbonnier (the paper's), optionally plus an SSIM term and a temporal-stability term."""
 from __future__ import annotations
 
 import torch
@@ -30,7 +30,7 @@ def ssim(prediction: torch.Tensor, target: torch.Tensor, window: int = 7) -> tor
 
 
 class ReconstructionLoss(torch.nn.Module):
-    """Charbonnier plus ``ssim_weight * (1 - SSIM)``."""
+    """Charbonnier plus ``ssim_weight * (1 - SSIM)`` (per frame; the temporal term is added by the trainer)."""
 
     def __init__(self, eps: float = CHARBONNIER_EPS, ssim_weight: float = 0.0):
         super().__init__()
@@ -41,3 +41,22 @@ class ReconstructionLoss(torch.nn.Module):
         if self.ssim_weight:
             loss = loss + self.ssim_weight * (1.0 - ssim(prediction.float(), target.float()))
         return loss
+
+
+def temporal_charbonnier(output: torch.Tensor, previous_output: torch.Tensor, target: torch.Tensor,
+                         previous_target: torch.Tensor, hr_motion: torch.Tensor,
+                         eps: float = CHARBONNIER_EPS) -> torch.Tensor:
+    """Charbonnier of the output's frame-to-frame change minus the ground truth's, after warping.
+
+    The previous frames are backward-warped onto the current one with ``hr_motion`` (B, 2, H, W),
+    HR pixels; pixels whose reprojection leaves the screen do not count. The training
+    counterpart of :func:`volsr_core.sr.evaluation.temporal_error` (which is an L1 mean).
+    """
+    from volsr_core.sr.network import backward_warp
+
+    ones = torch.ones_like(output[:, :1])
+    warped = backward_warp(torch.cat([previous_output, previous_target, ones], 1), hr_motion)
+    valid = (warped[:, -1:] > 0.999).to(output.dtype)
+    change = (output - warped[:, :3]) - (target - warped[:, 3:6])
+    per_pixel = torch.sqrt(change * change + eps * eps) * valid
+    return per_pixel.sum() / (valid.sum() * 3).clamp(min=1.0)

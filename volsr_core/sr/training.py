@@ -25,9 +25,9 @@ from torch.utils.data import DataLoader, Sampler
 from volsr_core.atomic import atomic_write
 from volsr_core.sr.checkpoint import save_checkpoint, load_checkpoint
 from volsr_core.sr.dataset import SequenceDataset
-from volsr_core.sr.losses import ReconstructionLoss
+from volsr_core.sr.losses import ReconstructionLoss, temporal_charbonnier
 from volsr_core.sr.metrics import psnr_ssim
-from volsr_core.sr.network import NetworkConfig, SuperResolutionNet, run_unrolled, variant_config
+from volsr_core.sr.network import NetworkConfig, SuperResolutionNet, run_unrolled, upsample_motion, variant_config
 
 LOG_FIELDS = ["step", "epoch", "loss", "lr", "val_psnr", "val_ssim", "seconds"]
 
@@ -107,15 +107,13 @@ class Trainer:
         data = config["data"]
         # a sample carries the frames of `unroll` steps: N previous frames for the oldest step, plus one per step
         self.unroll = int(config["train"]["unroll"])
-        if config["model"]["taau_base"] and self.unroll > 1:
-            raise ValueError("a TAAU-based network trains on single frames: set train.unroll to 1")
         frames = data["previous_frames"] + self.unroll - 1
         self.train_set = SequenceDataset(data["root"], "train", data["scale"], frames, data["crop"],
                                          tuple(data["features"]), augment=data["augment"], seed=config["seed"],
                                          hr_frames=self.unroll, taau=bool(config["model"]["taau_base"]))
         self.val_set = SequenceDataset(data["root"], "val", data["scale"], frames, data["val_crop"],
                                        tuple(data["features"]), augment=False, seed=config["seed"],
-                                       taau=bool(config["model"]["taau_base"]))
+                                       hr_frames=self.unroll, taau=bool(config["model"]["taau_base"]))
         torch.manual_seed(config["seed"])
         self.model = build_model(config).to(self.device)
         optim = config["optim"]
@@ -126,6 +124,7 @@ class Trainer:
         self.amp = bool(config["train"]["amp"]) and self.device.type == "cuda"
         self.scaler = torch.amp.GradScaler("cuda", enabled=self.amp)
         self.loss = ReconstructionLoss(config["loss"]["charbonnier_eps"], config["loss"]["ssim_weight"])
+        self.temporal_weight = float(config["loss"]["temporal_weight"])
         self.step, self.best_psnr = 0, -math.inf
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.world > 1 else self.model)
 
@@ -201,8 +200,14 @@ class Trainer:
             targets = targets[:, None]
         self.optimizer.zero_grad(set_to_none=True)
         with torch.autocast(self.device.type, dtype=torch.float16, enabled=self.amp):
-            outputs = self.forward(self.ddp, batch)  # oldest first; targets index k = frame t-k
-            loss = sum(self.loss(out, targets[:, len(outputs) - 1 - i]) for i, out in enumerate(outputs)) / len(outputs)
+            outputs = self.forward(self.ddp, batch)[::-1]  # index k = frame t-k, as the targets
+            loss = sum(self.loss(out, targets[:, k]) for k, out in enumerate(outputs)) / len(outputs)
+            if self.temporal_weight and len(outputs) > 1:
+                motion = batch["motion"].to(self.device)
+                loss = loss + self.temporal_weight * sum(
+                    temporal_charbonnier(outputs[k], outputs[k + 1], targets[:, k], targets[:, k + 1],
+                                         upsample_motion(motion[:, k], self.model.config.scale), self.loss.eps)
+                    for k in range(len(outputs) - 1)) / (len(outputs) - 1)
         self.scaler.scale(loss).backward()
         self.scaler.step(self.optimizer)
         self.scaler.update()
@@ -213,8 +218,11 @@ class Trainer:
         """The outputs for the batch's last ``unroll`` frames, oldest first (recurrent: each feeds the next)."""
         cfg = self.model.config
         lr, motion, jitter = (batch[k].to(self.device) for k in ("lr", "motion", "jitter"))
-        if cfg.taau_base:
-            return [model(lr, motion, jitter, batch["taau"].to(self.device))]
+        if cfg.taau_base:  # each step refines its own frame's TAAU estimate
+            taau = batch["taau"].to(self.device)
+            n = cfg.previous_frames
+            return [model(lr[:, i:i + n + 1], motion[:, i:i + n + 1], jitter[:, i:i + n + 1], taau[:, i])
+                    for i in reversed(range(self.unroll))]
         return run_unrolled(model, lr, motion, jitter, self.unroll, cfg.previous_frames, cfg.recurrent)
 
     @torch.no_grad()
