@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat setup.py constraints.txt | sha1sum | cut -c1-12)
 export VTK_DEFAULT_OPENGL_WINDOW ?= vtkEGLRenderWindow
 
-.PHONY: demo test bench env clean
+.PHONY: demo test bench env paraview-env clean
 
 $(STAMP):
 	$(PYTHON) -m venv $(VENV)
@@ -16,6 +16,25 @@ $(STAMP):
 
 env: $(STAMP)
 
+## .venv-paraview: the venv ParaView's pvpython runs our package in (docs/paraview.md). Debian's Python 3.11 (the one
+## pvpython embeds) with its system site-packages: ParaView, its VTK and Debian's numpy 1.24 (constraints-paraview.txt
+## overrides the numpy pin); our package and onnxruntime on top; never a pip vtk. `make test` builds it when pvpython exists.
+PV_PYTHON ?= /usr/bin/python3
+PV_VENV   := .venv-paraview
+PV_STAMP  := $(PV_VENV)/.installed-$(shell cat setup.py constraints.txt constraints-paraview.txt | sha1sum | cut -c1-12)
+PVPYTHON  := $(shell command -v pvpython 2>/dev/null)
+
+$(PV_STAMP):
+	$(PV_PYTHON) -m venv --system-site-packages $(PV_VENV)
+	$(PV_VENV)/bin/python -m pip install --quiet --upgrade pip
+	{ grep -v '^numpy==' constraints.txt; cat constraints-paraview.txt; } > $(PV_VENV)/constraints.txt
+	$(PV_VENV)/bin/python -m pip install --quiet -c $(PV_VENV)/constraints.txt -e ".[video]" onnxruntime
+	! ls -d $(PV_VENV)/lib/python3*/site-packages/vtkmodules 2>/dev/null  # ParaView's own VTK only
+	rm -f $(PV_VENV)/.installed-*
+	touch $(PV_STAMP)
+
+paraview-env: $(PV_STAMP)
+
 ## the main job on the embedded default data: an orbit of the synthetic CT phantom rendered at 128x128,
 ## upscaled 4x by the shipped S model; side-by-side (native | bilinear | VolSR) PNGs and MP4 in out/demo,
 ## ms per frame of each stage and PSNR against an 8-spp native render
@@ -25,7 +44,7 @@ demo: $(STAMP)
 		--reference-spp 8 --out out/demo
 
 ## the test suite (the data in ../shared/data is used when present; under CI=true it must be)
-test: $(STAMP)
+test: $(STAMP) $(if $(PVPYTHON),$(PV_STAMP))
 	$(BIN)/python -m pytest -q
 
 ## renderer vs VTK's CPU ray caster on the shared volumes (not part of the tests)

@@ -14,12 +14,15 @@ with the image's own origin, spacing and direction matrix and ``P`` the vtkVolum
 (position, orientation, scale and user matrix). The :class:`~volsr_core.scene.volume.Volume`
 built from them (:func:`volume_from_vtk`) has exactly that index-to-world map, so VTK's world
 coordinates and cameras are taken over unchanged. Scalars are read as (z, y, x) = (k, j, i).
-A scene whose world is RAS (3D Slicer) is converted at its own adapter, not here.
+A scene whose world is not LPS (3D Slicer's RAS) passes ``world_matrix``, the rigid map from its
+world to LPS, which is applied to the cameras and to a volume read from VTK
+(volsr_core/hosts/slicer.py).
 
 VTK is imported from ``vtkmodules`` (Slicer's and ParaView's VTK serve) when this module loads.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import warnings
@@ -145,6 +148,26 @@ def read_window(window, renderer=None) -> np.ndarray:
     return pixels[::-1, :, :3].copy()
 
 
+def rigid_matrix(matrix: Any) -> np.ndarray:
+    """``matrix`` as a 4x4 float64 array, checked to be a rotation (det +1) plus a translation."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0)):
+        raise ValueError(f"expected a 4x4 affine matrix, got shape {m.shape}")
+    r = m[:3, :3]
+    if not np.allclose(r.T @ r, np.eye(3), atol=1e-9) or np.linalg.det(r) < 0:
+        raise ValueError("the world matrix must be rigid: a rotation (det +1, no mirror, no scale) plus a translation")
+    return m
+
+
+def transform_camera(camera: Camera, matrix: Any) -> Camera:
+    """``camera`` carried by the rigid 4x4 ``matrix`` (position, focal point, view up); the image it
+    sees of a scene carried by the same matrix is unchanged."""
+    m = rigid_matrix(matrix)
+    r, t = m[:3, :3], m[:3, 3]
+    return dataclasses.replace(camera, position=r @ camera.position + t, focal_point=r @ camera.focal_point + t,
+                               view_up=r @ camera.view_up)
+
+
 def rotation_between(a: Camera, b: Camera) -> float:
     """Angle in degrees of the rotation taking camera ``a``'s (right, up, forward) frame to ``b``'s."""
     ra, rb = np.stack(a.basis()), np.stack(b.basis())
@@ -168,7 +191,11 @@ class VolSRPostProcess:
       a changed view angle, a switched projection or a distance/parallel scale changed by more
       than ``reset_zoom`` times drops the history (the upscaler also drops it by itself on
       implausible motion, a new size, a new transfer function);
-    - ``enabled``: on/off; off shows the host's own rendering again.
+    - ``enabled``: on/off; off shows the host's own rendering again;
+    - ``world_matrix``: for a host whose world is not LPS, the rigid 4x4 map from its world to
+      VolSR's (3D Slicer: ``diag(-1, -1, 1, 1)``, RAS -> LPS); applied to every camera read from
+      VTK and to a volume read from VTK (not to a ``volume`` given here, which is in LPS already).
+      None: VTK's world is VolSR's.
 
     The transfer function is rebuilt from the vtkVolumeProperty (colour, scalar opacity,
     gradient opacity, shading) only when the property or its MTime changed. The pipeline's
@@ -186,16 +213,17 @@ class VolSRPostProcess:
                  scale: int = 4, variant: str = "S", layer: int | None = None, device: str = "cpu",
                  backend: str = "auto", fp16: bool = False, threads: int | None = None,
                  sample_distance: float | None = None, reset_angle: float = 30.0, reset_zoom: float = 2.0,
-                 enabled: bool = True):
+                 enabled: bool = True, world_matrix: Any = None):
         window = renderer.GetRenderWindow()
         if window is None:
             raise ValueError("the renderer is not in a render window yet (add it with window.AddRenderer first)")
         self.renderer, self.vtk_volume, self.window = renderer, vtk_volume, window
         self.reset_angle, self.reset_zoom = float(reset_angle), float(reset_zoom)
+        self.world_matrix = None if world_matrix is None else rigid_matrix(world_matrix)
         self._own_volume = volume is None
         self._volume_key = self._geometry_key() if self._own_volume else None
         if volume is None:
-            volume = volume_from_vtk(vtk_volume_input(vtk_volume), _matrix(vtk_volume.GetMatrix()))
+            volume = volume_from_vtk(vtk_volume_input(vtk_volume), self._prop_matrix())
         self._caster_options = {"sample_distance": sample_distance, "device": device}
         transfer_function = self._read_property()
         self.pipeline = Pipeline(volume, transfer_function, model, scale=scale, size=self._viewport_size(),
@@ -263,6 +291,13 @@ class VolSRPostProcess:
         if not self._busy:
             self.window.Render()
 
+    def set_volume(self, volume: Volume) -> None:
+        """Draw ``volume`` (in VolSR's world) from now on instead of what the vtkVolume's mapper reads;
+        the history starts afresh."""
+        self._replace_volume(volume)
+        self._own_volume, self._volume_key = False, None
+        self.reset("new volume")
+
     def reset(self, reason: str = "asked") -> None:
         """Drop the history: the next frame starts afresh."""
         self.pipeline.reset()
@@ -273,6 +308,18 @@ class VolSRPostProcess:
     def _viewport_size(self) -> tuple[int, int]:
         w, h = self.renderer.GetSize()
         return max(int(w), 1), max(int(h), 1)
+
+    def _prop_matrix(self) -> np.ndarray:
+        """The vtkVolume's matrix followed by the host-world-to-LPS map."""
+        prop = _matrix(self.vtk_volume.GetMatrix())
+        return prop if self.world_matrix is None else self.world_matrix @ prop
+
+    def _replace_volume(self, volume: Volume) -> None:
+        from volsr_core.render.raycaster import RayCaster
+
+        caster = self.pipeline.caster
+        self.pipeline.caster = RayCaster(volume, caster.transfer_function, background=caster.background,
+                                         **self._caster_options)
 
     def _geometry_key(self):
         image = vtk_volume_input(self.vtk_volume)
@@ -321,12 +368,7 @@ class VolSRPostProcess:
         if self._own_volume:
             key = self._geometry_key()
             if key[0] is not self._volume_key[0] or key[1:] != self._volume_key[1:]:
-                from volsr_core.render.raycaster import RayCaster
-
-                volume = volume_from_vtk(key[0], _matrix(self.vtk_volume.GetMatrix()))
-                caster = self.pipeline.caster
-                self.pipeline.caster = RayCaster(volume, caster.transfer_function, background=caster.background,
-                                                 **self._caster_options)
+                self._replace_volume(volume_from_vtk(key[0], self._prop_matrix()))
                 self._volume_key = key
                 self.reset("new volume")
         prop = self.vtk_volume.GetProperty()
@@ -364,6 +406,8 @@ class VolSRPostProcess:
         self._sync_scene()
         w, h = self.pipeline.size
         camera = camera_from_vtk(self.renderer.GetActiveCamera(), aspect=w / h)
+        if self.world_matrix is not None:
+            camera = transform_camera(camera, self.world_matrix)
         reason = self._camera_jump(camera)
         if reason:
             self.reset(reason)

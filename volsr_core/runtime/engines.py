@@ -16,6 +16,7 @@ import numpy as np
 
 from volsr_core.errors import InputError
 
+METADATA_KEY = "volsr.network"  # the ONNX metadata entry holding the NetworkConfig as JSON
 PROVIDER_ORDER = ("TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExecutionProvider")
 
 
@@ -45,8 +46,6 @@ class OnnxEngine:
     def __init__(self, path: str | os.PathLike, providers: Sequence[str] | None = None, fp16: bool = False,
                  threads: int | None = None):
         import onnxruntime as ort
-
-        from volsr_core.runtime.export import METADATA_KEY
 
         self.path = Path(path)
         self.providers = list(providers) if providers else choose_providers()

@@ -15,9 +15,9 @@ from pathlib import Path
 import torch
 
 from volsr_core.atomic import atomic_write
+from volsr_core.runtime.engines import METADATA_KEY
 from volsr_core.sr.network import NetworkConfig, SuperResolutionNet
 
-METADATA_KEY = "volsr.network"
 OPSET = 17
 
 
