@@ -21,7 +21,7 @@ LIMIT_BYTES = 10 * 1024 * 1024
 
 def metrics_table(path: Path) -> list[str]:
     results = json.loads(path.read_text())
-    lines = [f"`{path.relative_to(REPO)}` ({results['split']} split, {results['scale']}x, "
+    lines = [f"`{path.resolve().relative_to(REPO).as_posix()}` ({results['split']} split, {results['scale']}x, "
              f"{len(results['videos'])} videos):", "",
              "| method | PSNR dB | SSIM | temporal error (lower is steadier) |", "|---|---|---|---|"]
     for method, o in results["overall"].items():
@@ -54,7 +54,7 @@ def main() -> None:
             raise SystemExit(f"{path}: {path.stat().st_size / 2**20:.1f} MiB, over the 10 MiB limit")
     cfg = model.config
     entry = {"name": args.name, "variant": args.variant, "scale": cfg.scale, "previous_frames": cfg.previous_frames,
-             "recurrent": cfg.recurrent, "features": list(cfg.features),
+             "recurrent": cfg.recurrent, "taau_base": cfg.taau_base, "features": list(cfg.features),
              "files": {"pt": pt.name, "onnx": onnx_path.name, "card": f"{args.name}.md"},
              "sha256": {"pt": file_sha256(pt), "onnx": file_sha256(onnx_path)},
              "parameters": sum(p.numel() for p in model.parameters())}
@@ -67,6 +67,7 @@ def main() -> None:
         fh.write("\n")
     card = [f"# Model card: {args.name}", "",
             f"VolSR variant {args.variant}, {cfg.scale}x per axis, {'recurrent, ' if cfg.recurrent else ''}"
+            f"{'TAAU-based (refines the TAAU estimate of each frame; the upscaler runs TAAU before it), ' if cfg.taau_base else ''}"
             f"{cfg.previous_frames} previous frames, inputs {', '.join(cfg.features)}; "
             f"{entry['parameters']:,} parameters. Files: `{pt.name}` ({pt.stat().st_size / 2**20:.2f} MiB, weights "
             f"only, `torch.load(weights_only=True)`), `{onnx_path.name}` ({onnx_path.stat().st_size / 2**20:.2f} MiB, "
@@ -74,7 +75,7 @@ def main() -> None:
             "**Intended use: interactive visualisation (upscaling direct volume renderings while the camera moves). "
             "Not for diagnosis:** the network invents plausible detail that was not rendered, and it was "
             "trained on a handful of volumes.", "",
-            "## Training", "", f"Config `{args.config.as_posix()}`:", "", "```yaml",
+            "## Training", "", f"Config `{args.config.resolve().relative_to(REPO).as_posix()}`:", "", "```yaml",
             args.config.read_text().strip(), "```", "", args.card_notes.strip(), "", "## Metrics", ""]
     for path in args.eval:
         card += metrics_table(path)

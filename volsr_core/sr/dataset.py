@@ -34,7 +34,8 @@ class SequenceDataset(Dataset):
       then count the N frames each step sees plus T - 1);
     - ``taau`` (T, 3, P, P), only with ``taau=True``: the TAAU estimates of the ``hr_frames``
       frames t, t-1, ... (:class:`~volsr_core.temporal.taau.TemporalUpsampler` run over the video
-      from frame 0 on the LR colour, motion and jitter; computed once per video and process);
+      from frame 0 on the LR colour, motion and jitter; computed for every video when the
+      dataset is made, so that forked loader workers inherit it);
     - ``video``, ``frame``: int64 scalars, the video's number and t (for debugging).
 
     Crops are aligned across scales: an LR origin (x0, y0) in LR pixels is drawn, and the HR crop
@@ -81,6 +82,9 @@ class SequenceDataset(Dataset):
         self.epoch = 0
         self._files: dict[int, h5py.File] = {}
         self._pid = os.getpid()
+        if self.taau:  # here, not in DataLoader workers: numba's thread pool deadlocks in a forked child
+            for video_index in range(len(self.videos)):
+                self._taau_frames(video_index)
 
     @property
     def channels(self) -> int:
@@ -156,7 +160,7 @@ class SequenceDataset(Dataset):
         return item
 
     def _taau_frames(self, video_index: int) -> np.ndarray:
-        """(T, H, W, 3) float32: TAAU over the whole video at this scale, computed on first use."""
+        """(T, H, W, 3) float32: TAAU over the whole video at this scale, computed once."""
         if video_index not in self._taau:
             from volsr_core.temporal.taau import TemporalUpsampler
 
@@ -184,7 +188,7 @@ class SequenceDataset(Dataset):
         return self._files[video_index]
 
     def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_files": {}, "_taau": {}}
+        return {**self.__dict__, "_files": {}}
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:
