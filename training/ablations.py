@@ -90,7 +90,8 @@ def write_doc(path: Path, sections: list, steps: int) -> None:
              "non-recurrent network, variant S, "
              f"{steps} steps of batch 8 and 64-pixel crops per run (training/configs/ablation_base.yaml), each "
              "scored on its dataset's test split (3 videos, 24 frames of 256² each). Short runs: the "
-             "directions are what to read, not the absolute numbers.", ""]
+             "directions are what to read, not the absolute numbers. What they say, and where they differ "
+             "from the paper: [network.md](network.md#the-papers-three-studies).", ""]
     for study, rows in sections:
         lines += [f"## {study}", ""] + table(rows) + [""]
     with atomic_write(path, "w") as fh:
