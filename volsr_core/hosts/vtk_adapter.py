@@ -224,7 +224,6 @@ class VolSRPostProcess:
         self._volume_key = self._geometry_key() if self._own_volume else None
         if volume is None:
             volume = volume_from_vtk(vtk_volume_input(vtk_volume), self._prop_matrix())
-        self._caster_options = {"sample_distance": sample_distance, "device": device}
         transfer_function = self._read_property()
         self.pipeline = Pipeline(volume, transfer_function, model, scale=scale, size=self._viewport_size(),
                                  variant=variant, device=device, backend=backend, fp16=fp16, threads=threads,
@@ -294,7 +293,7 @@ class VolSRPostProcess:
     def set_volume(self, volume: Volume) -> None:
         """Draw ``volume`` (in VolSR's world) from now on instead of what the vtkVolume's mapper reads;
         the history starts afresh."""
-        self._replace_volume(volume)
+        self.pipeline.set_volume(volume)
         self._own_volume, self._volume_key = False, None
         self.reset("new volume")
 
@@ -313,13 +312,6 @@ class VolSRPostProcess:
         """The vtkVolume's matrix followed by the host-world-to-LPS map."""
         prop = _matrix(self.vtk_volume.GetMatrix())
         return prop if self.world_matrix is None else self.world_matrix @ prop
-
-    def _replace_volume(self, volume: Volume) -> None:
-        from volsr_core.render.raycaster import RayCaster
-
-        caster = self.pipeline.caster
-        self.pipeline.caster = RayCaster(volume, caster.transfer_function, background=caster.background,
-                                         **self._caster_options)
 
     def _geometry_key(self):
         image = vtk_volume_input(self.vtk_volume)
@@ -368,7 +360,7 @@ class VolSRPostProcess:
         if self._own_volume:
             key = self._geometry_key()
             if key[0] is not self._volume_key[0] or key[1:] != self._volume_key[1:]:
-                self._replace_volume(volume_from_vtk(key[0], self._prop_matrix()))
+                self.pipeline.set_volume(volume_from_vtk(key[0], self._prop_matrix()))
                 self._volume_key = key
                 self.reset("new volume")
         prop = self.vtk_volume.GetProperty()

@@ -48,8 +48,8 @@ class Pipeline:
         if self.engine.config.scale != scale:
             raise ValueError(f"the model upscales {self.engine.config.scale}x, not {scale}x")
         self.scale = int(scale)
-        self.caster = RayCaster(volume, transfer_function, sample_distance=sample_distance, background=background,
-                                device=device)
+        self._caster_options = {"sample_distance": sample_distance, "device": device}
+        self.caster = RayCaster(volume, transfer_function, background=background, **self._caster_options)
         self.upscaler = StatefulUpscaler(self.engine)
         self.size = (int(size[0]), int(size[1]))
         self.frame = 0
@@ -65,6 +65,12 @@ class Pipeline:
     def resize(self, width: int, height: int) -> None:
         """A new output size; the history starts afresh at the next frame."""
         self.size = (int(width), int(height))
+
+    def set_volume(self, volume: Volume) -> None:
+        """A new volume (same transfer function and background); the history is dropped."""
+        caster = self.caster
+        self.caster = RayCaster(volume, caster.transfer_function, background=caster.background, **self._caster_options)
+        self.reset()
 
     def set_transfer_function(self, transfer_function: TransferFunction) -> None:
         """A new transfer function; the history is dropped (old colours would bleed in)."""
