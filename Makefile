@@ -40,7 +40,7 @@ paraview-env: $(PV_STAMP)
 ## ms per frame of each stage and PSNR against an 8-spp native render
 demo: $(STAMP)
 	$(BIN)/volsr info
-	$(BIN)/volsr upscale --orbit 24 --size 512 --scale 4 --side-by-side --video out/demo/phantom.mp4 \
+	$(BIN)/volsr upscale --orbit 24 --degrees 3 --size 512 --scale 4 --side-by-side --video out/demo/phantom.mp4 \
 		--reference-spp 8 --out out/demo
 
 ## the test suite (the data in ../shared/data is used when present; under CI=true it must be)

@@ -109,7 +109,8 @@ def cameras_for(args: argparse.Namespace, volume, n_default: int = 1) -> list:
     if args.camera_path:
         return read_camera_path(args.camera_path)
     n = args.orbit or n_default
-    return [c.reset_clipping_range(volume.bounds) for c in orbit(Camera.framing(volume.bounds), n,
+    degrees = n * args.degrees if args.degrees else 360.0
+    return [c.reset_clipping_range(volume.bounds) for c in orbit(Camera.framing(volume.bounds), n, degrees,
                                                                    elevation=args.elevation)]
 
 
@@ -316,6 +317,8 @@ def add_upscale_parser(sub) -> None:
     path = up.add_mutually_exclusive_group()
     path.add_argument("--camera-path", metavar="FILE", help="camera path JSON (vtkCamera terms)")
     path.add_argument("--orbit", type=int, metavar="N", help="N frames orbiting the volume (360 degrees) [24]")
+    up.add_argument("--degrees", type=float, metavar="DEG", help="orbit DEG degrees per frame instead of one full "
+                    "turn over the frames (temporal methods need small steps, as when a user drags)")
     up.add_argument("--elevation", type=float, default=0.0, metavar="DEG", help="elevation of the orbit, degrees [0]")
     up.add_argument("--out", required=True, metavar="DIR", help="folder; frames go to DIR/<input name>/")
     up.add_argument("--video", metavar="FILE.mp4|DIR", help="also write an H.264 MP4 (volsr[video]); several inputs: "
@@ -437,6 +440,8 @@ def build_parser() -> argparse.ArgumentParser:
     path = render.add_mutually_exclusive_group()
     path.add_argument("--camera-path", metavar="FILE", help="camera path JSON (vtkCamera terms)")
     path.add_argument("--orbit", type=int, metavar="N", help="N frames orbiting the volume (azimuth, 360 degrees)")
+    render.add_argument("--degrees", type=float, metavar="DEG",
+                        help="orbit DEG degrees per frame instead of one full turn over the frames")
     render.add_argument("--elevation", type=float, default=0.0, metavar="DEG",
                         help="elevation of the default anterior view, degrees [0]")
     render.add_argument("--spp", type=int, default=1, metavar="N", help="jittered samples per pixel (Halton 2,3) [1]")
