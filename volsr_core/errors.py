@@ -18,3 +18,17 @@ class InputError(VolSRError):
         self.path = None if path is None else os.fspath(path)
         self.problem = " ".join(str(problem).split())  # always one line
         super().__init__(self.problem if self.path is None else f"{self.path}: {self.problem}")
+
+
+def read_text_file(path: str | os.PathLike) -> str:
+    """A file's UTF-8 text, or an InputError naming the file and why it cannot be read."""
+    from pathlib import Path
+
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except IsADirectoryError:
+        raise InputError(path, "is a folder, not a file") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(path, f"cannot read as text: {getattr(err, 'strerror', None) or err}") from None

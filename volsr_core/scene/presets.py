@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from volsr_core.atomic import atomic_write
-from volsr_core.errors import InputError
+from volsr_core.errors import InputError, read_text_file
 from volsr_core.scene.slicer_presets import read_slicer_presets, read_vp_file
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
@@ -63,16 +63,6 @@ def _presets_from(data: Any, source: str | os.PathLike) -> dict[str, TransferFun
     return presets
 
 
-def _read_text(path: str | os.PathLike) -> str:
-    try:
-        return Path(path).read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(path, "no such file") from None
-    except IsADirectoryError:
-        raise InputError(path, "is a folder, not a file") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(path, f"cannot read as text: {getattr(err, 'strerror', None) or err}") from None
-
 
 def _pick(presets: Mapping[str, TransferFunction], name: str | None,
           source: str | os.PathLike | None) -> TransferFunction:
@@ -113,7 +103,7 @@ def get_preset(name: str) -> TransferFunction:
 
 def load_presets(path: str | os.PathLike) -> dict[str, TransferFunction]:
     """The presets of a VolSR presets JSON file, by name, in file order."""
-    return _presets_from(_decode(_read_text(path), path), path)
+    return _presets_from(_decode(read_text_file(path), path), path)
 
 
 def save_presets(path: str | os.PathLike, tfs: Mapping[str, TransferFunction] | Iterable[TransferFunction]) -> None:
@@ -132,7 +122,7 @@ def save_presets(path: str | os.PathLike, tfs: Mapping[str, TransferFunction] | 
 
 
 def _load_json(path: str | os.PathLike, name: str | None) -> TransferFunction:
-    data = _decode(_read_text(path), path)
+    data = _decode(read_text_file(path), path)
     if isinstance(data, dict) and "format" not in data:
         tf = _entry(data, path, "transfer function")
         if name is not None and name.lower() != tf.name.lower():
@@ -157,7 +147,7 @@ def load_transfer_function(path: str | os.PathLike, name: str | None = None) -> 
     """
     suffix = Path(path).suffix.lower()
     if suffix not in (".json", ".xml", ".mrml", ".vp"):
-        head = _read_text(path).lstrip()[:1]
+        head = read_text_file(path).lstrip()[:1]
         suffix = {"{": ".json", "<": ".xml"}.get(head, ".vp")
     if suffix == ".json":
         return _load_json(path, name)

@@ -8,7 +8,7 @@ from typing import Any
 
 import yaml
 
-from volsr_core.errors import InputError
+from volsr_core.errors import InputError, read_text_file
 
 DEFAULTS: dict[str, Any] = {
     "seed": 0,
@@ -42,10 +42,9 @@ def _merge(base: dict[str, Any], update: dict[str, Any], path: str, source: Path
 def load_training_config(path: str | os.PathLike) -> dict[str, Any]:
     """The config at ``path`` over :data:`DEFAULTS`; ``data.root`` and ``out`` resolved against the file's folder."""
     source = Path(path)
+    text = read_text_file(source)
     try:
-        raw = yaml.safe_load(source.read_text(encoding="utf-8")) or {}
-    except FileNotFoundError:
-        raise InputError(source, "no such file") from None
+        raw = yaml.safe_load(text) or {}
     except yaml.YAMLError as err:
         raise InputError(source, f"not valid YAML: {' '.join(str(err).split())}") from None
     if not isinstance(raw, dict):

@@ -18,7 +18,7 @@ from typing import Any, Mapping
 
 import yaml
 
-from volsr_core.errors import InputError
+from volsr_core.errors import InputError, read_text_file
 from volsr_core.scene.presets import get_preset, load_transfer_function
 
 SCALES = (2, 4, 8, 16)
@@ -164,14 +164,9 @@ def _kind(value: Any) -> str:
 def read_config(path: str | os.PathLike) -> DatasetConfig:
     """Read and check a dataset config (YAML); InputError ``"<path>: <key>: <problem>"`` otherwise."""
     file = Path(path)
+    text = read_text_file(file)
     try:
-        doc = yaml.safe_load(file.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(file, "no such file") from None
-    except IsADirectoryError:
-        raise InputError(file, "is a folder, not a config file") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(file, f"cannot read: {getattr(err, 'strerror', None) or err}") from None
+        doc = yaml.safe_load(text)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
