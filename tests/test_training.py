@@ -90,3 +90,20 @@ def test_a_taau_based_network_trains_unrolled_with_the_temporal_loss(tiny_sequen
     result = Trainer(config, progress=False).run()
     assert result["step"] == 6 and torch.isfinite(torch.tensor(losses(tmp_path / "run"))).all()
     assert result["best_psnr"] > 10
+
+
+def test_model_init_starts_fine_tuning_from_given_weights(tiny_sequences, tmp_path):
+    first = load_training_config(write_config(tmp_path / "a", tiny_sequences, steps=4))
+    Trainer(first, progress=False).run()
+    start = tmp_path / "a" / "run" / "checkpoints" / "last.pt"
+    tuned = load_training_config(write_config(tmp_path / "b", tiny_sequences, steps=4))
+    tuned["model"]["init"] = str(start)
+    trainer = Trainer(tuned, progress=False)
+    expected = load_checkpoint(start, trusted=True)["model"]
+    for name, value in trainer.model.state_dict().items():
+        assert torch.equal(value, expected[name]), name
+    other = load_training_config(write_config(tmp_path / "c", tiny_sequences, steps=4))
+    other["model"]["widths"] = [8, 16]
+    other["model"]["init"] = str(start)
+    with pytest.raises(Exception, match="different network"):
+        Trainer(other, progress=False)

@@ -16,7 +16,7 @@ DEFAULTS: dict[str, Any] = {
     "data": {"root": None, "scale": 4, "previous_frames": 2, "crop": 96,
              "features": ["color", "depth", "max_rgba"], "augment": True, "num_workers": 0,
              "val_crop": None},
-    "model": {"variant": "S", "fold": None, "widths": None, "recurrent": False, "taau_base": False},
+    "model": {"variant": "S", "fold": None, "widths": None, "recurrent": False, "taau_base": False, "init": None},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "min_lr_ratio": 0.05},
     "train": {"steps": 1000, "batch_size": 8, "unroll": 1, "checkpoint_every": 200, "validate_every": None,
               "amp": True, "max_val_samples": 64},
@@ -40,7 +40,8 @@ def _merge(base: dict[str, Any], update: dict[str, Any], path: str, source: Path
 
 
 def load_training_config(path: str | os.PathLike) -> dict[str, Any]:
-    """The config at ``path`` over :data:`DEFAULTS`; ``data.root`` and ``out`` resolved against the file's folder."""
+    """The config at ``path`` over :data:`DEFAULTS`; ``data.root``, ``out`` and ``model.init`` (weights to
+    fine-tune from) resolved against the file's folder."""
     source = Path(path)
     text = read_text_file(source)
     try:
@@ -52,9 +53,10 @@ def load_training_config(path: str | os.PathLike) -> dict[str, Any]:
     config = _merge(DEFAULTS, raw, "", source)
     if not config["data"]["root"]:
         raise InputError(source, "'data.root' (the dataset folder made by `volsr dataset`) is required")
-    for section, key in (("data", "root"), (None, "out")):
+    for section, key in (("data", "root"), (None, "out"), ("model", "init")):
         holder = config[section] if section else config
-        holder[key] = str((source.parent / os.path.expandvars(str(holder[key]))).resolve())
+        if holder[key] is not None:
+            holder[key] = str((source.parent / os.path.expandvars(str(holder[key]))).resolve())
     train = config["train"]
     for key in ("steps", "batch_size", "unroll", "checkpoint_every"):
         if not isinstance(train[key], int) or train[key] < 1:

@@ -23,7 +23,8 @@ import torch.distributed as dist
 from torch.utils.data import DataLoader, Sampler
 
 from volsr_core.atomic import atomic_write
-from volsr_core.sr.checkpoint import save_checkpoint, load_checkpoint
+from volsr_core.errors import InputError
+from volsr_core.sr.checkpoint import load_checkpoint, load_model, save_checkpoint
 from volsr_core.sr.dataset import SequenceDataset
 from volsr_core.sr.losses import ReconstructionLoss, temporal_charbonnier
 from volsr_core.sr.metrics import psnr_ssim
@@ -115,7 +116,10 @@ class Trainer:
                                        tuple(data["features"]), augment=False, seed=config["seed"],
                                        hr_frames=self.unroll, taau=bool(config["model"]["taau_base"]))
         torch.manual_seed(config["seed"])
-        self.model = build_model(config).to(self.device)
+        self.model = build_model(config)
+        if config["model"]["init"]:
+            self._start_from(Path(config["model"]["init"]))
+        self.model.to(self.device)
         optim = config["optim"]
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=optim["lr"], weight_decay=optim["weight_decay"])
         steps = config["train"]["steps"]
@@ -127,6 +131,14 @@ class Trainer:
         self.temporal_weight = float(config["loss"]["temporal_weight"])
         self.step, self.best_psnr = 0, -math.inf
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.world > 1 else self.model)
+
+    def _start_from(self, path: Path) -> None:
+        """Fine-tuning: begin at the weights of a model file or checkpoint of the same network."""
+        start = load_model(path)
+        if start.config != self.model.config:
+            raise InputError(path, f"model.init is a different network ({start.config.to_dict()}) "
+                                   f"from the config's ({self.model.config.to_dict()})")
+        self.model.load_state_dict(start.state_dict())
 
     # -- state ---------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
