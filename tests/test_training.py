@@ -17,6 +17,7 @@ import yaml
 
 torch = pytest.importorskip("torch")
 
+from volsr_core.errors import InputError  # noqa: E402
 from volsr_core.sr.checkpoint import load_checkpoint  # noqa: E402
 from volsr_core.sr.config import load_training_config  # noqa: E402
 from volsr_core.sr.training import Trainer  # noqa: E402
@@ -105,5 +106,5 @@ def test_model_init_starts_fine_tuning_from_given_weights(tiny_sequences, tmp_pa
     other = load_training_config(write_config(tmp_path / "c", tiny_sequences, steps=4))
     other["model"]["widths"] = [8, 16]
     other["model"]["init"] = str(start)
-    with pytest.raises(Exception, match="different network"):
+    with pytest.raises(InputError, match="different network"):
         Trainer(other, progress=False)
