@@ -2,8 +2,9 @@
 
     python training/ablations.py [--steps 1500] [--doc docs/ablations.md]
 
-Needs the datasets of training/configs/dataset_default.yaml (out/dataset_default) and
-training/configs/dataset_scales.yaml (out/dataset_scales). Every run starts from
+Needs the datasets of training/configs/dataset_default.yaml (out/dataset_default),
+training/configs/dataset_scales.yaml (out/dataset_scales) and training/configs/dataset_finetune.yaml
+(out/dataset_finetune). Every run starts from
 training/configs/ablation_base.yaml and changes only what its study varies; runs land in
 runs/ablations/NAME and resume where they stopped (a finished run is not trained again).
 Each is scored by ``evaluate`` on its dataset's test split, with bilinear, bicubic and TAAU on
@@ -18,12 +19,14 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT, SCALES = REPO / "out" / "dataset_default", REPO / "out" / "dataset_scales"
+SOFT = REPO / "out" / "dataset_finetune"  # + semi-transparent looks: does RGBA at max alpha add more there?
 ALL_FEATURES, NO_RGBA = ["color", "depth", "max_rgba"], ["color", "depth"]
 
 # study -> (run name, dataset, scale, previous frames, features), as the paper's tables
 STUDIES = {
     "RGBA at max alpha, 8x (paper: +1.0 dB with it)": [
-        ("rgba_8x_with", DEFAULT, 8, 2, ALL_FEATURES), ("rgba_8x_without", DEFAULT, 8, 2, NO_RGBA)],
+        ("rgba_8x_with", DEFAULT, 8, 2, ALL_FEATURES), ("rgba_8x_without", DEFAULT, 8, 2, NO_RGBA),
+        ("rgba_8x_soft_with", SOFT, 8, 2, ALL_FEATURES), ("rgba_8x_soft_without", SOFT, 8, 2, NO_RGBA)],
     "previous frames N, 4x (paper: 39.35 / 39.94 / 40.49 dB for N = 1 / 2 / 3)": [
         ("frames_4x_n1", DEFAULT, 4, 1, ALL_FEATURES), ("frames_4x_n2", DEFAULT, 4, 2, ALL_FEATURES),
         ("frames_4x_n3", DEFAULT, 4, 3, ALL_FEATURES)],
@@ -85,11 +88,15 @@ def write_doc(path: Path, sections: list, steps: int) -> None:
 
     lines = ["# The paper's three studies on VolSR's data", "",
              "Made by `python training/ablations.py --steps " f"{steps}` (after `volsr dataset "
-             "training/configs/dataset_default.yaml --out out/dataset_default` and `volsr dataset "
-             "training/configs/dataset_scales.yaml --out out/dataset_scales`), on the 2-core CPU: the paper's "
+             "training/configs/dataset_default.yaml --out out/dataset_default`, `volsr dataset "
+             "training/configs/dataset_scales.yaml --out out/dataset_scales` and, for the `soft` runs, the "
+             "default dataset plus semi-transparent looks: `cp -r out/dataset_default out/dataset_finetune; "
+             "volsr dataset training/configs/dataset_finetune.yaml --out out/dataset_finetune`), on the 2-core "
+             "CPU: the paper's "
              "non-recurrent network, variant S, "
              f"{steps} steps of batch 8 and 64-pixel crops per run (training/configs/ablation_base.yaml), each "
-             "scored on its dataset's test split (3 videos, 24 frames of 256² each). Short runs: the "
+             "scored on its dataset's test split (3 videos of 24 frames at 256²; 9 for the `soft` runs). Short "
+             "runs: the "
              "directions are what to read, not the absolute numbers. What they say, and where they differ "
              "from the paper: [network.md](network.md#the-papers-three-studies).", ""]
     for study, rows in sections:
