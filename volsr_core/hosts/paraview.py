@@ -328,9 +328,7 @@ class ViewUpscaler:
             if key != self._tf:
                 self.pipeline.set_transfer_function(tf)
                 self._tf = key
-            if background != self.pipeline.caster.background:
-                self.pipeline.caster.background = background
-                self.pipeline.reset()
+            self.pipeline.set_background(background)
             if size != self.pipeline.size:
                 self.pipeline.resize(*size)
         image = self.pipeline.render(camera)
@@ -416,9 +414,7 @@ class FilterUpscaler:
             if tf_key != self._tf_key:
                 self.pipeline.set_transfer_function(tf)
                 self._tf_key = tf_key
-            if background != self.pipeline.caster.background:
-                self.pipeline.caster.background = background
-                self.pipeline.reset()
+            self.pipeline.set_background(background)
             if (width, height) != self.pipeline.size:
                 self.pipeline.resize(width, height)
         camera = self.camera_for(volume)

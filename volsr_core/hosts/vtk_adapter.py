@@ -370,8 +370,7 @@ class VolSRPostProcess:
             self.resets += 1
             self.last_reset_reason = "new transfer function"
         background = tuple(float(c) for c in self.renderer.GetBackground())
-        if background != self.pipeline.caster.background:
-            self.pipeline.caster.background = background
+        if self.pipeline.set_background(background):
             self.reset("new background")
         size = self._viewport_size()
         if size != self.pipeline.size:

@@ -77,6 +77,16 @@ class Pipeline:
         self.caster.transfer_function = transfer_function
         self.reset()
 
+    def set_background(self, background: tuple[float, float, float]) -> bool:
+        """A new background colour (RGB in [0, 1]); the history is dropped if it differs. Returns
+        whether it did."""
+        background = tuple(float(c) for c in background)
+        if background == tuple(self.caster.background):
+            return False
+        self.caster.background = background
+        self.reset()
+        return True
+
     def reset(self) -> None:
         """Forget previous frames (a camera cut): the next frame has no motion vectors or history."""
         self.upscaler.reset()
