@@ -389,7 +389,7 @@ class VolSRLogic(ScriptedLoadableModuleLogic):
         import numpy as np
         import vtk
 
-        from volsr_core.hosts.slicer import matrix_4x4
+        from volsr_core.scene.vtk_bridge import matrix_4x4
 
         ijkToRas = vtk.vtkMatrix4x4()
         volumeNode.GetIJKToRASMatrix(ijkToRas)
@@ -413,7 +413,8 @@ class VolSRLogic(ScriptedLoadableModuleLogic):
     def applyPreset(self, volumeNode, name: str) -> None:
         """Write VolSR's preset ``name``, placed on the node's values, into its volume property node."""
         self.ensureDependencies()
-        from volsr_core.hosts.slicer import apply_transfer_function, preset_for
+        from volsr_core.hosts.slicer import preset_for
+        from volsr_core.scene.vtk_bridge import write_volume_property as apply_transfer_function
 
         displayNode = self.displayNode(volumeNode)
         propertyNode = displayNode.GetVolumePropertyNode()
@@ -578,7 +579,7 @@ class VolSRTest(ScriptedLoadableModuleTest):
         self.delayDisplay("VolSR in the 3D view")
         logic = VolSRLogic()
         logic.ensureDependencies()
-        from volsr_core.hosts.vtk_adapter import read_window
+        from volsr_core.scene.vtk_bridge import read_window
 
         node = self.phantomVolumeNode()
         model = self.testModel()

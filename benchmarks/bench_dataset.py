@@ -20,22 +20,22 @@ import time
 from pathlib import Path
 
 from volsr_core.atomic import atomic_write
-from volsr_core.temporal.dataset_config import read_config
-from volsr_core.temporal.sequences import load_scene, plan_videos, write_video
+from volsr_core.dataset.config import read_config
+from volsr_core.dataset.videos import load_dataset_volume, plan_videos, write_video
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def bench_volume(config, plans, device: str, folder: Path) -> dict:
     """Render ``plans`` (videos of one volume) into ``folder``; time the rendering and writing."""
-    scene = load_scene(config, plans[0].volume_index, device)
-    scene.caster.render(scene.pool[0], 8, 8)  # compile (or load) the renderer outside the timing
+    source = load_dataset_volume(config, plans[0].volume_index, device)
+    source.caster.render(source.pool[0], 8, 8)  # compile (or load) the renderer outside the timing
     started = time.perf_counter()
     for plan in plans:
-        write_video(config, scene, plan, folder)
+        write_video(config, source, plan, folder)
     seconds = time.perf_counter() - started
     frames = len(plans) * config.frames_per_video
-    return {"volume": scene.name, "videos": len(plans), "frames": frames, "seconds": round(seconds, 2),
+    return {"volume": source.name, "videos": len(plans), "frames": frames, "seconds": round(seconds, 2),
             "fps": round(frames / seconds, 4)}
 
 

@@ -54,7 +54,7 @@ def bootstrap(argv: list[str]) -> list[str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from volsr_core.cli import add_volume_arguments, parse_range, parse_size
+    from volsr_core.apps.options import add_volume_arguments, parse_range, parse_size
 
     p = argparse.ArgumentParser(prog="pvpython scripts/volsr_paraview.py", description=__doc__.split("\n\n")[0],
                                 epilog="--venv DIR (before or after the other options): the venv holding VolSR "
@@ -107,8 +107,9 @@ def main(argv: list[str]) -> int:
         print("volsr_paraview: error: --orbit and --scale must be at least 1", file=sys.stderr)
         return 2
     try:
-        from volsr_core.cli import choose_transfer_function, load_volume_argument
+        from volsr_core.apps.options import load_volume_argument
         from volsr_core.hosts.paraview import orbit_and_upscale
+        from volsr_core.scene.presets import choose_transfer_function
 
         volume = load_volume_argument(args)
         tf = choose_transfer_function(volume, args.preset, args.tf, args.tf_name, args.range)

@@ -55,8 +55,8 @@ volumes:
 @pytest.fixture(scope="session")
 def tiny_sequences(tmp_path_factory) -> Path:
     """A dataset of 3 phantom videos x 3 frames at 32² (scale 4), one video per split."""
-    from volsr_core.temporal.dataset_config import read_config
-    from volsr_core.temporal.sequences import generate
+    from volsr_core.dataset.config import read_config
+    from volsr_core.dataset.videos import generate
 
     folder = tmp_path_factory.mktemp("tiny_sequences")
     (folder / "tiny.yaml").write_text(TINY_SEQUENCES)

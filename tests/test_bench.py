@@ -7,9 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from volsr_core.runtime.bench import (
-    check_targets, curve_psnr_at, parse_scene_spec, pareto_front,
-)
+from volsr_core.apps.bench.report import check_targets, curve_psnr_at, pareto_front
+from volsr_core.apps.bench.scenes import parse_volume_spec as parse_scene_spec
 from volsr_core.temporal.taau import resize_bilinear, upscale_bilinear
 
 SPP, FACTORS, SCALES = [1, 4], [2, 3, 4, 6, 8], [2, 4, 8]

@@ -10,7 +10,7 @@ pytestmark = pytest.mark.vtk
 vtk_core = pytest.importorskip("vtkmodules.vtkRenderingCore")
 vtk_gl = pytest.importorskip("vtkmodules.vtkRenderingOpenGL2")
 
-from volsr_core.hosts.vtk_scene import apply_camera  # noqa: E402
+from volsr_core.scene.vtk_bridge import apply_camera  # noqa: E402
 
 BOUNDS = (-50.0, 70.0, -30.0, 40.0, -100.0, 90.0)
 

@@ -16,7 +16,8 @@ pytest.importorskip("imageio_ffmpeg")
 from volsr_core.cli import build_parser, main  # noqa: E402
 from volsr_core.hashing import file_sha256  # noqa: E402
 from volsr_core.io import make_phantom  # noqa: E402
-from volsr_core.runtime import batch, models  # noqa: E402
+from volsr_core.apps import upscale as batch  # noqa: E402
+from volsr_core.runtime import models  # noqa: E402
 from volsr_core.runtime.export import export_onnx  # noqa: E402
 from volsr_core.sr.network import SuperResolutionNet, variant_config  # noqa: E402
 

@@ -15,10 +15,10 @@ import pytest
 
 from volsr_core.cli import main
 from volsr_core.errors import InputError
-from volsr_core.temporal.dataset_config import read_config
+from volsr_core.dataset.config import read_config
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
-from volsr_core.temporal.sequences import generate, plan_videos
-from volsr_core.temporal.store import store_layout, validate_manifest
+from volsr_core.dataset.videos import generate, plan_videos
+from volsr_core.dataset.store import store_layout, validate_manifest
 
 REPO = Path(__file__).resolve().parents[1]
 VIDEOS_PER_VOLUME = 3

@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 from volsr_core.cli import main  # noqa: E402
 from volsr_core.hashing import file_sha256  # noqa: E402
 from volsr_core.sr.checkpoint import load_model, save_checkpoint  # noqa: E402
-from volsr_core.sr.evaluation import METHODS, temporal_error  # noqa: E402
+from volsr_core.apps.evaluate import METHODS, temporal_error  # noqa: E402
 from volsr_core.sr.network import NetworkConfig, SuperResolutionNet  # noqa: E402
 from volsr_core.errors import InputError  # noqa: E402
 

@@ -28,7 +28,7 @@ def volume(ct_avm_path):
 
 def test_screenshots_with_a_volsr_preset_are_the_pipelines_output(volume, model):
     from volsr_core.hosts.pyvista import add_sr_volume
-    from volsr_core.hosts.vtk_adapter import camera_from_vtk
+    from volsr_core.scene.vtk_bridge import camera_from_vtk
 
     plotter = pv.Plotter(off_screen=True, window_size=(W, H))
     adapter = add_sr_volume(plotter, volume, transfer_function="CT-AAA", clim=(0, 446), model=model)
@@ -58,8 +58,8 @@ def test_screenshots_with_a_volsr_preset_are_the_pipelines_output(volume, model)
 
 def test_pyvista_colormaps_and_image_data_with_a_direction_matrix(volume, model):
     from volsr_core.hosts.pyvista import add_sr_volume
-    from volsr_core.hosts.vtk_adapter import camera_from_vtk
-    from volsr_core.scene.vtk_property import from_vtk_volume_property
+    from volsr_core.scene.vtk_bridge import camera_from_vtk
+    from volsr_core.scene.vtk_bridge import from_vtk_volume_property
 
     # the image carries its own origin and direction (LPS), no user matrix: VolSR reads them from VTK
     grid = pv.ImageData(dimensions=volume.shape_xyz, spacing=volume.spacing, origin=volume.origin,

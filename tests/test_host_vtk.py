@@ -47,7 +47,8 @@ def ct_avm(ct_avm_path):
 
 def scene(volume, tf):
     """A plain VTK scene (vtkGPUVolumeRayCastMapper, fixed sampling) looking at the volume from the front."""
-    from volsr_core.hosts.vtk_scene import VtkVolumeRenderer, apply_camera
+    from benchmarks.vtk_scene import VtkVolumeRenderer
+    from volsr_core.scene.vtk_bridge import apply_camera
 
     host = VtkVolumeRenderer(volume, tf, W, H)
     apply_camera(host.renderer.GetActiveCamera(), Camera.framing(volume.bounds, aspect=W / H).zoom(1.3))
@@ -55,7 +56,9 @@ def scene(volume, tf):
 
 
 def test_volsr_frames_in_the_window_are_the_pipelines_and_follow_the_camera(ct_avm, model):
-    from volsr_core.hosts.vtk_adapter import VolSRPostProcess, camera_from_vtk, read_window, to_uint8
+    from volsr_core.hosts.vtk_adapter import VolSRPostProcess
+    from volsr_core.images import to_uint8
+    from volsr_core.scene.vtk_bridge import camera_from_vtk, read_window
 
     volume, tf = ct_avm
     host = scene(volume, tf)
@@ -89,7 +92,9 @@ def test_volsr_frames_in_the_window_are_the_pipelines_and_follow_the_camera(ct_a
 
 
 def test_turning_volsr_off_restores_the_hosts_own_rendering(ct_avm, model):
-    from volsr_core.hosts.vtk_adapter import VolSRPostProcess, camera_from_vtk, read_window, to_uint8
+    from volsr_core.hosts.vtk_adapter import VolSRPostProcess
+    from volsr_core.images import to_uint8
+    from volsr_core.scene.vtk_bridge import camera_from_vtk, read_window
 
     volume, tf = ct_avm
     host = scene(volume, tf)
@@ -119,8 +124,10 @@ def test_turning_volsr_off_restores_the_hosts_own_rendering(ct_avm, model):
 
 
 def test_property_edits_camera_jumps_resizes_and_reentrant_renders(model):
-    from volsr_core.hosts.vtk_adapter import VolSRPostProcess, read_window, to_uint8
-    from volsr_core.scene.vtk_property import from_vtk_volume_property
+    from volsr_core.hosts.vtk_adapter import VolSRPostProcess
+    from volsr_core.images import to_uint8
+    from volsr_core.scene.vtk_bridge import read_window
+    from volsr_core.scene.vtk_bridge import from_vtk_volume_property
 
     volume = Volume.from_record(make_phantom(shape=(40, 40, 40)))
     host = scene(volume, get_preset("CT-Phantom"))
@@ -164,7 +171,8 @@ def test_property_edits_camera_jumps_resizes_and_reentrant_renders(model):
 
 
 def test_a_property_volsr_cannot_hold_leaves_the_frame_to_the_host(model):
-    from volsr_core.hosts.vtk_adapter import VolSRPostProcess, read_window
+    from volsr_core.hosts.vtk_adapter import VolSRPostProcess
+    from volsr_core.scene.vtk_bridge import read_window
 
     volume = Volume.from_record(make_phantom(shape=(40, 40, 40)))
     host = scene(volume, get_preset("CT-Phantom"))
@@ -183,16 +191,14 @@ def test_the_coordinate_rule_vtk_world_is_our_lps_world():
     from vtkmodules.vtkCommonDataModel import vtkImageData
     from vtkmodules.vtkRenderingCore import vtkCamera
 
-    from volsr_core.hosts.vtk_adapter import camera_from_vtk, volume_from_vtk
-    from volsr_core.hosts.vtk_scene import apply_camera, vtk_image
+    from volsr_core.scene.vtk_bridge import apply_camera, camera_from_vtk, image_data, placement_matrix, volume_from_image
 
     record = make_phantom(shape=(12, 10, 8))
     direction = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     volume = Volume(array=record.array, spacing=(0.7, 0.8, 1.5), origin=(10.0, -20.0, 5.0), direction=direction)
     # placed by the vtkVolume's user matrix (vtk_scene's way) ...
-    image, matrix = vtk_image(volume)
-    prop = np.array([[matrix.GetElement(r, c) for c in range(4)] for r in range(4)])
-    placed = volume_from_vtk(image, prop)
+    image = image_data(volume, placed=False)
+    placed = volume_from_image(image, placement_matrix(volume))
     # ... or by the image's own origin, spacing and direction, with a non-zero extent start
     own = vtkImageData()
     own.DeepCopy(image)
@@ -200,7 +206,7 @@ def test_the_coordinate_rule_vtk_world_is_our_lps_world():
     own.SetSpacing(*volume.spacing)
     own.SetDirectionMatrix(*direction.ravel())
     own.SetOrigin(*(np.asarray(volume.origin) - direction @ (np.asarray(volume.spacing) * [2, 0, 0])))
-    for built in (placed, volume_from_vtk(own)):
+    for built in (placed, volume_from_image(own)):
         assert np.allclose(built.index_to_world, volume.index_to_world)
         assert np.array_equal(built.array, volume.array)
 

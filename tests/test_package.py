@@ -7,8 +7,8 @@ import sys
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "volsr_core"
-LAYERS = ["io", "scene", "render", "temporal", "sr", "runtime", "hosts", "cli"]
-SHARED = {"errors", "atomic", "hashing"}  # plain helpers every layer may use
+LAYERS = ["io", "scene", "render", "temporal", "dataset", "sr", "runtime", "hosts", "apps", "cli"]
+SHARED = {"errors", "atomic", "hashing", "images"}  # plain helpers every layer may use
 
 
 def layer_of(module: str) -> str | None:
@@ -19,7 +19,8 @@ def layer_of(module: str) -> str | None:
 
 
 def test_core_imports_without_vtk_torch_or_onnxruntime():
-    code = ("import sys, volsr_core.io, volsr_core.scene, volsr_core.render, volsr_core.temporal, volsr_core.cli;"
+    code = ("import sys, volsr_core.io, volsr_core.scene, volsr_core.render, volsr_core.temporal, volsr_core.dataset,"
+            " volsr_core.dataset.videos, volsr_core.sr.history, volsr_core.apps.upscale, volsr_core.cli;"
             "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('vtk', 'vtkmodules', 'torch', 'onnxruntime'));"
             "print(bad); sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

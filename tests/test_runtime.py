@@ -129,9 +129,9 @@ def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(tmp_p
     assert np.abs(pipeline.last_low_resolution.motion).max() == 0
     assert not np.allclose(again, images[2], atol=1e-3)
     pipeline.render(cameras[0])
-    assert not pipeline.set_background((0, 0, 0)), "the same background keeps the history"
+    assert pipeline.update(background=(0, 0, 0)) is None, "the same background keeps the history"
     assert pipeline.previous_camera is not None
-    assert pipeline.set_background((0.2, 0.3, 0.4)) and pipeline.previous_camera is None
+    assert pipeline.update(background=(0.2, 0.3, 0.4)) == "new background" and pipeline.previous_camera is None
     pipeline.render(cameras[0])
     corner = pipeline.last_low_resolution.color[0, 0]
     assert corner == pytest.approx([0.2, 0.3, 0.4], abs=1e-3), "the new background shows where no ray hits"

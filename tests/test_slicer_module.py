@@ -270,9 +270,10 @@ def test_a_preset_is_written_into_an_existing_volume_property_in_place():
     pytest.importorskip("vtkmodules.vtkRenderingCore", reason="VTK is not installed (pip install 'volsr[vtk]')")
     from vtkmodules.vtkRenderingCore import vtkVolumeProperty
 
-    from volsr_core.hosts.slicer import apply_transfer_function, preset_for
+    from volsr_core.hosts.slicer import preset_for
+    from volsr_core.scene.vtk_bridge import write_volume_property as apply_transfer_function
     from volsr_core.scene import get_preset
-    from volsr_core.scene.vtk_property import from_vtk_volume_property
+    from volsr_core.scene.vtk_bridge import from_vtk_volume_property
 
     prop = vtkVolumeProperty()
     prop.GetRGBTransferFunction(0).AddRGBPoint(0.0, 1.0, 0.0, 0.0)  # what Slicer's property node starts with
@@ -377,9 +378,10 @@ def test_volsr_draws_a_ras_scene_as_the_pipeline_draws_it_in_lps(tmp_path, model
     camera converted by hand; then the history is used, the frame time is read and VolSR goes off."""
     pytest.importorskip("vtkmodules.vtkRenderingVolumeOpenGL2", reason="VTK is not installed (pip install 'volsr[vtk]')")
     from volsr_core.hosts.slicer import SlicerSession, session_for
-    from volsr_core.hosts.vtk_adapter import camera_from_vtk, read_window, to_uint8
+    from volsr_core.images import to_uint8
+    from volsr_core.scene.vtk_bridge import camera_from_vtk, read_window
     from volsr_core.runtime.pipeline import Pipeline
-    from volsr_core.scene.vtk_property import from_vtk_volume_property
+    from volsr_core.scene.vtk_bridge import from_vtk_volume_property
 
     array = make_phantom(shape=(40, 44, 36)).array
     ijk_to_ras = ijk_to_ras_matrix(np.diag([-1.0, -1.0, 1.0]), (1.6, 1.4, 1.5), (28.0, 30.0, -29.0))

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 import torch
 
-from volsr_core.sr.dataset import SequenceDataset
-from volsr_core.temporal.dataset_config import read_config
+from volsr_core.sr.loader import SequenceDataset
+from volsr_core.dataset.config import read_config
 from volsr_core.temporal.jitter import halton_jitter
 from volsr_core.temporal.jitter import jitter_phases
-from volsr_core.temporal.sequences import generate
+from volsr_core.dataset.videos import generate
 from volsr_core.temporal.warp import backward_warp
 
 FRAMES = 5

@@ -295,7 +295,7 @@ def test_rescaling_scales_gradient_magnitudes_by_the_same_factor():
 
 # VTK -----------------------------------------------------------------------------------------
 def test_core_modules_import_without_loading_vtk():
-    code = ("import sys, volsr_core.scene, volsr_core.scene.vtk_property; "
+    code = ("import sys, volsr_core.scene, volsr_core.scene.presets, volsr_core.scene.slicer_presets; "
             "sys.exit(any(m.startswith(('vtk', 'vtkmodules')) for m in sys.modules))")
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
@@ -303,8 +303,8 @@ def test_core_modules_import_without_loading_vtk():
 @pytest.fixture(scope="module")
 def vtk_property():
     pytest.importorskip("vtkmodules.vtkRenderingCore")
-    from volsr_core.scene import vtk_property
-    return vtk_property
+    from volsr_core.scene import vtk_bridge
+    return vtk_bridge
 
 
 def _assert_matches_vtk(tf: TransferFunction, prop) -> None:

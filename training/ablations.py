@@ -40,7 +40,7 @@ def run_one(name: str, data: Path, scale: int, previous: int, features: list[str
     """Train (or resume) one run and evaluate its last weights on the test split; cached in eval.json."""
     from volsr_core.sr.checkpoint import load_model
     from volsr_core.sr.config import load_training_config
-    from volsr_core.sr.evaluation import evaluate, write_report
+    from volsr_core.apps.evaluate import evaluate, write_report
     from volsr_core.sr.training import Trainer
 
     out = REPO / "runs" / "ablations" / name

@@ -12,52 +12,8 @@ from typing import Sequence
 
 import numpy as np
 
+from volsr_core.apps.options import add_volume_arguments, load_volume_argument, parse_range, parse_size
 from volsr_core.errors import InputError, VolSRError
-
-
-# -- shared argument handling ---------------------------------------------------------------------
-def parse_size(text: str) -> tuple[int, int]:
-    """'512' -> (512, 512); '640x480' -> (640, 480) as (width, height)."""
-    try:
-        parts = [int(p) for p in text.lower().split("x")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must be W or WxH in pixels, got {text!r}") from None
-    if len(parts) == 1:
-        parts *= 2
-    if len(parts) != 2 or min(parts) < 1:
-        raise argparse.ArgumentTypeError(f"size must be W or WxH with positive integers, got {text!r}")
-    return parts[0], parts[1]
-
-
-def parse_range(text: str) -> tuple[float, float] | str:
-    """'auto', 'none' or 'LO,HI'."""
-    if text in ("auto", "none"):
-        return text
-    try:
-        lo, hi = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"range must be auto, none or LO,HI, got {text!r}") from None
-    if not hi > lo:
-        raise argparse.ArgumentTypeError(f"range needs LO < HI, got {text!r}")
-    return lo, hi
-
-
-def add_volume_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("volume", nargs="?", help="DICOM folder (or a file in it), .nrrd, .nii[.gz], .mha/.mhd or .vti; "
-                   "omitted: the built-in synthetic CT phantom")
-    p.add_argument("--series", metavar="UID", help="DICOM SeriesInstanceUID to load (default: the series with most slices)")
-    p.add_argument("--resample", action="store_true",
-                   help="resample DICOM slices with missing or uneven gaps to uniform spacing instead of refusing")
-
-
-def load_volume_argument(args: argparse.Namespace):
-    """The Volume the arguments name, or the phantom when none is given."""
-    from volsr_core.io import make_phantom
-    from volsr_core.scene import Volume
-
-    if args.volume is None:
-        return Volume.from_record(make_phantom())
-    return Volume.load(args.volume, series_uid=args.series, resample=args.resample)
 
 
 # -- volsr info -----------------------------------------------------------------------------------
@@ -87,40 +43,13 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 # -- volsr render ---------------------------------------------------------------------------------
-def choose_transfer_function(volume, preset: str | None, tf_file: str | None, tf_name: str | None,
-                             placement) -> "TransferFunction":
-    """The transfer function the arguments ask for, placed on the volume's values (see place_on_volume).
-
-    Default preset: CT-Phantom for the phantom, CT-Bone otherwise.
-    """
-    from volsr_core.scene.presets import get_preset, load_transfer_function, place_on_volume
-
-    if tf_file is not None:
-        tf = load_transfer_function(tf_file, name=tf_name)
-    else:
-        tf = get_preset(preset or ("CT-Phantom" if volume.source.startswith("phantom") else "CT-Bone"))
-    return place_on_volume(tf, volume, placement)
-
-
 def cameras_for(args: argparse.Namespace, volume, n_default: int = 1) -> list:
-    from volsr_core.scene import Camera
-    from volsr_core.scene.camera_paths import orbit, read_camera_path
+    """The cameras ``--camera-path`` or ``--orbit``/``--degrees``/``--elevation`` ask for."""
+    from volsr_core.scene.camera_paths import orbit_around, read_camera_path
 
     if args.camera_path:
         return read_camera_path(args.camera_path)
-    n = args.orbit or n_default
-    degrees = n * args.degrees if args.degrees else 360.0
-    return [c.reset_clipping_range(volume.bounds) for c in orbit(Camera.framing(volume.bounds), n, degrees,
-                                                                   elevation=args.elevation)]
-
-
-def write_png(path: Path, rgb8: np.ndarray) -> None:
-    from PIL import Image
-
-    from volsr_core.atomic import atomic_write
-
-    with atomic_write(path) as fh:
-        Image.fromarray(rgb8).save(fh, format="PNG")
+    return orbit_around(volume.bounds, args.orbit or n_default, args.degrees, args.elevation)
 
 
 def output_paths(out: str, n_frames: int) -> tuple[list[Path], Path]:
@@ -140,7 +69,9 @@ def output_paths(out: str, n_frames: int) -> tuple[list[Path], Path]:
 def cmd_render(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from volsr_core.images import to_uint8, write_png
     from volsr_core.render import RayCaster
+    from volsr_core.scene.presets import choose_transfer_function
     from volsr_core.temporal import TemporalAntiAliasing, halton_jitter, render_supersampled
 
     if args.taa and args.spp > 1:
@@ -165,7 +96,7 @@ def cmd_render(args: argparse.Namespace) -> int:
             color = render_supersampled(caster, camera, width, height, spp=args.spp)
         else:
             color = taa(frame.color, frame.motion) if taa else frame.color
-        write_png(png, np.clip(np.rint(color * 255), 0, 255).astype(np.uint8))
+        write_png(png, to_uint8(color))
         previous = camera
     elapsed = time.perf_counter() - started
     mode = "TAA" if taa else f"{args.spp} spp"
@@ -176,8 +107,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 # -- volsr dataset --------------------------------------------------------------------------------
 def cmd_dataset(args: argparse.Namespace) -> int:
-    from volsr_core.temporal.dataset_config import read_config
-    from volsr_core.temporal.sequences import generate, parse_shard
+    from volsr_core.dataset.config import read_config
+    from volsr_core.dataset.videos import generate, parse_shard
 
     shard = parse_shard(args.shard)
     generate(read_config(args.config), args.out, shard=shard, device=args.device)
@@ -201,8 +132,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 # -- volsr eval -----------------------------------------------------------------------------------
 def cmd_eval(args: argparse.Namespace) -> int:
+    from volsr_core.apps.evaluate import METHODS, evaluate, write_report
     from volsr_core.sr.checkpoint import load_model
-    from volsr_core.sr.evaluation import METHODS, evaluate, write_report
 
     model = load_model(args.model)
     results, showcase = evaluate(model, args.data, args.split)
@@ -222,13 +153,14 @@ AUTO_VARIANT_RULE = ("auto: the largest shipped variant (L > M > S) whose networ
 
 
 def cmd_upscale(args: argparse.Namespace) -> int:
+    from volsr_core.apps import upscale as batch
+    from volsr_core.images import require_video
     from volsr_core.render import RayCaster
-    from volsr_core.runtime import batch
     from volsr_core.runtime.engines import open_engine
     from volsr_core.runtime.models import model_file
     from volsr_core.runtime.pipeline import Pipeline
     from volsr_core.scene.camera_paths import read_camera_path
-    from volsr_core.scene.presets import get_preset, load_transfer_function
+    from volsr_core.scene.presets import choose_transfer_function, get_preset, load_transfer_function
 
     if args.reference_spp < 0 or args.fps <= 0:
         raise InputError(None, "--reference-spp must be 0 (off) or more and --fps positive")
@@ -238,7 +170,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     inputs = batch.expand_inputs(args.inputs)
     videos = batch.video_paths(args.video, [item.name for item in inputs])
     if videos:
-        batch.require_video()
+        require_video()
     for path in {v.parent for v in videos.values()}:
         if path.exists() and not path.is_dir():
             raise InputError(path, "exists and is not a folder")
@@ -355,20 +287,20 @@ def parse_int_list(text: str) -> list[int]:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from volsr_core.runtime import bench
+    from volsr_core.apps.bench import report, run
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(out, "exists and is not a folder")
-    results = bench.run_benchmark(
+    results = run.run_benchmark(
         args.volumes, args.size, frames=args.frames, degrees=args.degrees, warmup=args.warmup,
         reference_spp=args.reference_spp, spp=args.native_spp, factors=args.factors, scales=args.scales,
         variants=[v.strip().upper() for v in args.variants.split(",") if v.strip()], models_dir=args.models_dir,
         preset=args.preset, placement=args.range, threads=args.threads, device=args.device)
-    written = bench.write_outputs(results, out)
+    written = report.write_outputs(results, out)
     for scene, targets in results["targets"].items():
         print(f"{scene}:")
-        for line in bench.target_lines(targets):
+        for line in report.target_lines(targets):
             print("  " + line.replace("**", ""))
     print(f"wrote {', '.join(p.name for p in written)} to {out}")
     return 0

@@ -32,3 +32,12 @@ def read_text_file(path: str | os.PathLike) -> str:
         raise InputError(path, "is a folder, not a file") from None
     except (OSError, UnicodeDecodeError) as err:
         raise InputError(path, f"cannot read as text: {getattr(err, 'strerror', None) or err}") from None
+
+
+def require(module: str, message: str) -> None:
+    """Raise a one-line VolSRError ``message`` (which names the extra to install) unless ``module``
+    can be imported."""
+    import importlib.util
+
+    if importlib.util.find_spec(module) is None:
+        raise VolSRError(message)

@@ -3,8 +3,8 @@
 ParaView's world is VTK's, which is VolSR's: LPS millimetres, when the volume is read with VolSR's readers
 (:func:`show_volume` hands ParaView our voxels as a vtkImageData with origin, spacing and direction matrix,
 through a TrivialProducer). Cameras and transfer functions are read from the view and the volume's display
-with the VTK adapter's conversions (:func:`~volsr_core.hosts.vtk_adapter.camera_from_vtk`,
-:func:`~volsr_core.scene.vtk_property.from_vtk_volume_property`), so what VolSR draws is what the view shows:
+with the VTK adapter's conversions (:func:`~volsr_core.scene.vtk_bridge.camera_from_vtk`,
+:func:`~volsr_core.scene.vtk_bridge.from_vtk_volume_property`), so what VolSR draws is what the view shows:
 
 - colour: the display's lookup table (a vtkColorTransferFunction); opacity: its scalar opacity function;
   shading, ambient, diffuse, specular, specular power and scalar opacity unit distance: the display's;
@@ -48,28 +48,13 @@ def simple():
 
 
 # volumes -------------------------------------------------------------------------------------
-def image_data(volume: Volume, name: str = ARRAY):
-    """Our voxels as a vtkImageData placed in the world by its own origin, spacing and direction matrix
-    (point scalars ``name``, float32, (z, y, x) -> x fastest as VTK stores them)."""
-    from vtkmodules.util.numpy_support import numpy_to_vtk
-    from vtkmodules.vtkCommonDataModel import vtkImageData
-
-    image = vtkImageData()
-    image.SetDimensions(*volume.shape_xyz)
-    image.SetSpacing(*volume.spacing)
-    image.SetOrigin(*volume.origin)
-    image.SetDirectionMatrix(*np.asarray(volume.direction, dtype=np.float64).ravel())
-    scalars = numpy_to_vtk(np.ascontiguousarray(volume.array, dtype=np.float32).ravel(), deep=True)
-    scalars.SetName(name)
-    image.GetPointData().SetScalars(scalars)
-    return image
-
-
 def volume_source(volume: Volume, registration_name: str = "volume"):
     """A ParaView source (TrivialProducer) producing ``volume`` (builtin session only)."""
     pvs = simple()
     source = pvs.TrivialProducer(registrationName=registration_name)
-    source.GetClientSideObject().SetOutput(image_data(volume))
+    from volsr_core.scene.vtk_bridge import image_data
+
+    source.GetClientSideObject().SetOutput(image_data(volume, ARRAY))
     source.UpdatePipeline()
     return source
 
@@ -82,21 +67,20 @@ def _prop_matrix(display) -> np.ndarray | None:
     position, orientation, scale, origin = (list(v) for v in values)
     if position == [0.0] * 3 and orientation == [0.0] * 3 and scale == [1.0] * 3:
         return None
-    from vtkmodules.vtkRenderingCore import vtkVolume
+    from volsr_core.scene.vtk_bridge import matrix_4x4, vtkVolume
 
     prop = vtkVolume()  # the same transform maths as the representation's own prop
     prop.SetPosition(*position)
     prop.SetOrientation(*orientation)
     prop.SetScale(*scale)
     prop.SetOrigin(*origin)
-    m = prop.GetMatrix()
-    return np.array([[m.GetElement(r, c) for c in range(4)] for r in range(4)], dtype=np.float64)
+    return matrix_4x4(prop.GetMatrix())
 
 
 def volume_of(source, display=None) -> Volume:
     """Our :class:`Volume` for a ParaView source's vtkImageData output (its array coloured by ``display``, else
     the point scalars), placed by the image's geometry and the display's Position / Orientation / Scale."""
-    from volsr_core.hosts.vtk_adapter import volume_from_vtk
+    from volsr_core.scene.vtk_bridge import volume_from_image, vtkImageData
 
     source.UpdatePipeline()
     image = source.GetClientSideObject().GetOutputDataObject(0)
@@ -105,13 +89,11 @@ def volume_of(source, display=None) -> Volume:
     array = _colour_array(display)
     if array and image.GetPointData().GetArray(array) is not None and \
             image.GetPointData().GetScalars() is not image.GetPointData().GetArray(array):
-        from vtkmodules.vtkCommonDataModel import vtkImageData
-
         copy = vtkImageData()
         copy.ShallowCopy(image)
         copy.GetPointData().SetScalars(image.GetPointData().GetArray(array))
         image = copy
-    return volume_from_vtk(image, None if display is None else _prop_matrix(display), source="<ParaView source>")
+    return volume_from_image(image, None if display is None else _prop_matrix(display), source="<ParaView source>")
 
 
 def _colour_array(display) -> str:
@@ -164,13 +146,11 @@ def transfer_function_of(display, name: str = "") -> TransferFunction:
     """The transfer function ``display`` draws its volume with, as VolSR holds it.
 
     Built as a vtkVolumeProperty from the display's lookup table, opacity function and lighting and read
-    with :func:`~volsr_core.scene.vtk_property.from_vtk_volume_property` (the VTK adapter's conversion). A
+    with :func:`~volsr_core.scene.vtk_bridge.from_vtk_volume_property` (the VTK adapter's conversion). A
     lookup table in another colour space, on a log scale or with non-linear nodes is first sampled at 256
     values into a piecewise-linear RGB one (likewise the opacity function).
     """
-    from vtkmodules.vtkRenderingCore import vtkVolumeProperty
-
-    from volsr_core.scene.vtk_property import from_vtk_volume_property
+    from volsr_core.scene.vtk_bridge import from_vtk_volume_property, vtkVolumeProperty
 
     lut, pwf = display.LookupTable, display.ScalarOpacityFunction
     if lut is None or pwf is None:
@@ -198,7 +178,7 @@ def transfer_function_of(display, name: str = "") -> TransferFunction:
 
 
 def _resampled_color(function):
-    from vtkmodules.vtkRenderingCore import vtkColorTransferFunction
+    from volsr_core.scene.vtk_bridge import vtkColorTransferFunction
 
     lo, hi = function.GetRange()
     out = vtkColorTransferFunction()
@@ -209,7 +189,7 @@ def _resampled_color(function):
 
 
 def _resampled_opacity(function):
-    from vtkmodules.vtkCommonDataModel import vtkPiecewiseFunction
+    from volsr_core.scene.vtk_bridge import vtkPiecewiseFunction
 
     lo, hi = function.GetRange()
     out = vtkPiecewiseFunction()
@@ -257,7 +237,7 @@ def view_size(view) -> tuple[int, int]:
 
 def camera_of(view) -> Camera:
     """Our :class:`Camera` for the view's active vtkCamera (clipping range as ParaView's last render set it)."""
-    from volsr_core.hosts.vtk_adapter import camera_from_vtk
+    from volsr_core.scene.vtk_bridge import camera_from_vtk
 
     w, h = view_size(view)
     return camera_from_vtk(view.SMProxy.GetActiveCamera(), aspect=w / h)
@@ -265,7 +245,7 @@ def camera_of(view) -> Camera:
 
 def read_view(view) -> np.ndarray:
     """The view's last rendered pixels, uint8 (H, W, 3), row 0 at the top (builtin session)."""
-    from volsr_core.hosts.vtk_adapter import read_window
+    from volsr_core.scene.vtk_bridge import read_window
 
     return read_window(view.GetRenderWindow())
 
@@ -301,10 +281,8 @@ class ViewUpscaler:
         self.last_view: np.ndarray | None = None
         self.last_timings: dict[str, float] = {}
 
-    def _tf_key(self, tf: TransferFunction) -> str:
-        return json.dumps(tf.to_dict(), sort_keys=True)
-
     def render(self) -> np.ndarray:
+        """ParaView's frame, then VolSR's: read the view -> :meth:`Pipeline.update` -> :meth:`Pipeline.render`."""
         pvs = simple()
         started = time.perf_counter()
         pvs.Render(self.view)  # ParaView's frame first, always before onnxruntime starts
@@ -322,15 +300,7 @@ class ViewUpscaler:
             options = dict(self.options)
             model = options.pop("model")
             self.pipeline = Pipeline(self.volume, tf, model, size=size, background=background, **options)
-            self._tf = self._tf_key(tf)
-        else:
-            key = self._tf_key(tf)
-            if key != self._tf:
-                self.pipeline.set_transfer_function(tf)
-                self._tf = key
-            self.pipeline.set_background(background)
-            if size != self.pipeline.size:
-                self.pipeline.resize(*size)
+        self.pipeline.update(transfer_function=tf, background=background, size=size)
         image = self.pipeline.render(camera)
         self.last_camera, self.last_transfer_function = camera, tf
         self.last_timings = {"view_ms": 1000 * (viewed - started), **self.pipeline.last_timings}
@@ -343,8 +313,8 @@ class FilterUpscaler:
 
     Set the attributes (the plugin's property setters do), then call :meth:`upscale` with the input
     vtkImageData; it returns float32 (H, W, 3) in [0, 1], row 0 at the top. The Pipeline is kept between
-    calls (its history makes the network's output temporally stable) and rebuilt when the model, variant,
-    scale or input changes; a new transfer function or size drops the history.
+    calls (its history makes the network's output temporally stable) and rebuilt when the model, variant
+    or scale changes; a new input, transfer function, background or size drops the history.
 
     - ``size`` (width, height), ``scale``, ``model`` (a file; "" = the shipped model of ``variant``);
     - ``transfer_function_json``: a VolSR transfer function as JSON (``TransferFunction.to_dict``; what
@@ -372,7 +342,7 @@ class FilterUpscaler:
         self.last_camera: Camera | None = None
         self.last_transfer_function: TransferFunction | None = None
         self._key = None
-        self._tf_key = None
+        self._volume_key = None
         self._volume: Volume | None = None
 
     def transfer_function(self, volume: Volume) -> TransferFunction:
@@ -394,33 +364,31 @@ class FilterUpscaler:
         return camera.reset_clipping_range(volume.bounds)
 
     def upscale(self, image) -> np.ndarray:
-        from volsr_core.hosts.vtk_adapter import volume_from_vtk
+        """The frame for the input vtkImageData: read the properties -> :meth:`Pipeline.update` -> render."""
         from volsr_core.runtime.pipeline import Pipeline
+        from volsr_core.scene.vtk_bridge import volume_from_image
 
-        width, height = (max(int(v), 1) for v in self.size)
-        key = (str(self.model), self.variant, int(self.scale), image.GetMTime(),
-               image.GetPointData().GetScalars().GetMTime() if image.GetPointData().GetScalars() else 0)
-        if self.pipeline is None or key != self._key:
-            self._volume = volume_from_vtk(image, source="<ParaView input>")
-        volume = self._volume
-        tf = self.transfer_function(volume)
-        tf_key = json.dumps(tf.to_dict(), sort_keys=True)
+        size = tuple(max(int(v), 1) for v in self.size)
+        key = (str(self.model), self.variant, int(self.scale))
+        if self._volume_key != (image, image.GetMTime(), _scalars_mtime(image)):
+            self._volume = volume_from_image(image, source="<ParaView input>")
+            self._volume_key = (image, image.GetMTime(), _scalars_mtime(image))
+        tf = self.transfer_function(self._volume)
         background = tuple(float(v) for v in self.background)
         if self.pipeline is None or key != self._key:
-            self.pipeline = Pipeline(volume, tf, self.model or None, scale=int(self.scale), size=(width, height),
+            self.pipeline = Pipeline(self._volume, tf, self.model or None, scale=int(self.scale), size=size,
                                      variant=self.variant, background=background)
-            self._key, self._tf_key = key, tf_key
-        else:
-            if tf_key != self._tf_key:
-                self.pipeline.set_transfer_function(tf)
-                self._tf_key = tf_key
-            self.pipeline.set_background(background)
-            if (width, height) != self.pipeline.size:
-                self.pipeline.resize(width, height)
-        camera = self.camera_for(volume)
+            self._key = key
+        self.pipeline.update(volume=self._volume, transfer_function=tf, background=background, size=size)
+        camera = self.camera_for(self._volume)
         result = self.pipeline.render(camera)
         self.last_camera, self.last_transfer_function = camera, tf
         return result
+
+
+def _scalars_mtime(image) -> int:
+    scalars = image.GetPointData().GetScalars()
+    return scalars.GetMTime() if scalars is not None else 0
 
 
 # the pvpython script's job ---------------------------------------------------------------------
@@ -438,8 +406,8 @@ def orbit_and_upscale(volume: Volume, tf: TransferFunction, out: str | Path, *, 
     display held, VolSR preset JSON), ``summary.json``; and an MP4 at ``video`` when given. Returns the summary.
     """
     from volsr_core.atomic import atomic_write
-    from volsr_core.runtime import batch
-    from volsr_core.scene.camera_paths import orbit, write_camera_path
+    from volsr_core.images import mp4_writer, side_by_side as panels_side_by_side, to_uint8, write_png
+    from volsr_core.scene.camera_paths import orbit_around, write_camera_path
     from volsr_core.scene.presets import save_presets
 
     pvs = simple()
@@ -454,25 +422,24 @@ def orbit_and_upscale(volume: Volume, tf: TransferFunction, out: str | Path, *, 
     shown = apply_transfer_function(display, tf)
     if tf.gradient_opacity is not None:
         log("note: ParaView 5.11 has no gradient opacity for volumes; it is left out here and in VolSR's frames")
-    start = Camera.framing(volume.bounds, aspect=width / height)
-    cameras = orbit(start, frames, degrees=degrees, elevation=elevation)
+    cameras = orbit_around(volume.bounds, frames, degrees / frames, elevation, aspect=width / height)
     upscaler = ViewUpscaler(view, display, volume=volume, model=model, scale=scale, variant=variant,
                             device=device, threads=threads)
     used_cameras, timings = [], []
     with contextlib.ExitStack() as stack:
-        writer = stack.enter_context(batch.mp4_writer(video, fps=fps)) if video else None
+        writer = stack.enter_context(mp4_writer(video, fps=fps)) if video else None
         for i, camera in enumerate(cameras):
             set_camera(view, camera)
             image = upscaler.render()
-            rgb8 = batch.to_uint8(image)
-            batch.write_png(out / f"frame_{i:04d}.png", rgb8)
+            rgb8 = to_uint8(image)
+            write_png(out / f"frame_{i:04d}.png", rgb8)
             if save_view:
-                batch.write_png(out / f"paraview_{i:04d}.png", upscaler.last_view)
+                write_png(out / f"paraview_{i:04d}.png", upscaler.last_view)
             if side_by_side:
                 lw, lh = upscaler.pipeline.low_resolution_size
                 panels = [("ParaView 5.11", upscaler.last_view.astype(np.float32) / 255.0),
                           (f"VolSR {scale}x from {lw}x{lh}", image)]
-                batch.write_png(out / f"side_by_side_{i:04d}.png", batch.side_by_side(panels))
+                write_png(out / f"side_by_side_{i:04d}.png", panels_side_by_side(panels))
             if writer is not None:
                 writer.append_data(rgb8)
             used_cameras.append(upscaler.last_camera)

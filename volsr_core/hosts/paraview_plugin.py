@@ -166,7 +166,7 @@ class VolSRUpscale(VTKPythonAlgorithmBase):
         from vtkmodules.vtkCommonCore import VTK_UNSIGNED_CHAR
         from vtkmodules.vtkCommonDataModel import vtkImageData
 
-        from volsr_core.hosts.vtk_adapter import to_uint8
+        from volsr_core.images import to_uint8
 
         volume = vtkImageData.GetData(inInfoVec[0], 0)
         output = vtkImageData.GetData(outInfoVec, 0)

@@ -14,22 +14,15 @@ import numpy as np
 from volsr_core.hosts.vtk_adapter import VolSRPostProcess
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
-from volsr_core.scene.vtk_property import to_vtk_volume_property
+from volsr_core.scene.vtk_bridge import image_data, placement_matrix, to_vtk_volume_property
 
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-
-import pyvista as pv  # noqa: E402
+import pyvista as pv  # noqa: E402  (after the bridge: it chose the offscreen window)
 
 
 def to_pyvista(volume: Volume) -> tuple["pv.ImageData", np.ndarray]:
     """Our Volume as a ``pv.ImageData`` (spacing only, origin 0, point scalars "scalars") plus the
     4x4 user matrix (direction and origin) that places it in the world, as ``add_volume`` takes it."""
-    grid = pv.ImageData(dimensions=volume.shape_xyz, spacing=volume.spacing, origin=(0.0, 0.0, 0.0))
-    grid.point_data["scalars"] = volume.array.ravel()  # (z, y, x) C order: x fastest, as VTK stores it
-    matrix = np.eye(4)
-    matrix[:3, :3] = volume.direction
-    matrix[:3, 3] = volume.origin
-    return grid, matrix
+    return pv.wrap(image_data(volume, "scalars", placed=False)), placement_matrix(volume)
 
 
 def add_sr_volume(plotter: "pv.Plotter", volume: Any, scalars: str | np.ndarray | None = None, *,

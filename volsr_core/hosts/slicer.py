@@ -14,11 +14,10 @@ no picture: the same voxels seen by the same camera, both carried by it, give th
 :class:`SlicerSession` attaches :class:`~volsr_core.hosts.vtk_adapter.VolSRPostProcess` to the
 3D view's renderer (overlay on layer 3: Slicer draws on layers 0-2) and reads frame times back;
 it takes plain VTK objects, so the same code runs in Slicer and in an offscreen VTK window.
-VTK is imported from ``vtkmodules`` (Slicer's own VTK).
+VTK comes through :mod:`volsr_core.scene.vtk_bridge` (Slicer's own VTK; it leaves Slicer's window class alone).
 """
 from __future__ import annotations
 
-import os
 from typing import Any, Sequence
 
 import numpy as np
@@ -28,14 +27,9 @@ from volsr_core.scene.presets import get_preset, list_presets, place_on_volume
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 
-# The VTK adapter sets VTK_DEFAULT_OPENGL_WINDOW to EGL for offscreen use when unset; inside Slicer
-# that would change the window class VTK's factory hands to other modules, so the setting is undone.
-_WINDOW_VARIABLE = "VTK_DEFAULT_OPENGL_WINDOW"
-_had_window_variable = _WINDOW_VARIABLE in os.environ
-from volsr_core.hosts.vtk_adapter import VolSRPostProcess, transform_camera  # noqa: E402
-
-if not _had_window_variable:
-    os.environ.pop(_WINDOW_VARIABLE, None)
+from volsr_core.hosts.vtk_adapter import VolSRPostProcess
+from volsr_core.scene.camera import transform_camera
+from volsr_core.scene.vtk_bridge import matrix_4x4, write_volume_property
 
 RAS_TO_LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
 LPS_TO_RAS = RAS_TO_LPS.copy()  # its own inverse
@@ -62,16 +56,6 @@ def lps_to_ras(points: Any) -> np.ndarray:
 def ijk_to_lps(ijk_to_ras: Any) -> np.ndarray:
     """A volume node's 4x4 IJK-to-RAS matrix (numpy or vtkMatrix4x4) as IJK-to-LPS."""
     return RAS_TO_LPS @ matrix_4x4(ijk_to_ras)
-
-
-def matrix_4x4(matrix: Any) -> np.ndarray:
-    """A 4x4 float64 array from a numpy-like matrix or a vtkMatrix4x4."""
-    if hasattr(matrix, "GetElement"):
-        return np.array([[matrix.GetElement(r, c) for c in range(4)] for r in range(4)], dtype=np.float64)
-    m = np.asarray(matrix, dtype=np.float64)
-    if m.shape != (4, 4):
-        raise ValueError(f"expected a 4x4 matrix, got shape {m.shape}")
-    return m
 
 
 def camera_ras_to_lps(camera: Camera) -> Camera:
@@ -132,52 +116,7 @@ def preset_names() -> list[str]:
     return list(list_presets())
 
 
-# the vtkVolumeProperty Slicer's volume property node owns --------------------------------------------
-def apply_transfer_function(prop, tf: TransferFunction) -> None:
-    """Write ``tf`` (component 0) into an existing vtkVolumeProperty, editing its functions in place.
-
-    In place, so that Slicer's volume property node and its editors keep their function objects and
-    see the change; the VTK adapter notices it through the property's MTime.
-    """
-    if prop.GetColorChannels(0) == 3:
-        color = prop.GetRGBTransferFunction(0)
-        color.RemoveAllPoints()
-    else:
-        from vtkmodules.vtkRenderingCore import vtkColorTransferFunction
-
-        color = vtkColorTransferFunction()
-        prop.SetColor(0, color)
-    color.SetColorSpaceToRGB()
-    color.AllowDuplicateScalarsOn()
-    color.ClampingOn()
-    for x, r, g, b in tf.color:
-        color.AddRGBPoint(float(x), float(r), float(g), float(b))
-    opacity = prop.GetScalarOpacity(0)
-    opacity.RemoveAllPoints()
-    opacity.AllowDuplicateScalarsOn()
-    opacity.ClampingOn()
-    for x, a in tf.scalar_opacity:
-        opacity.AddPoint(float(x), float(a))
-    gradient = prop.GetGradientOpacity(0)
-    gradient.RemoveAllPoints()
-    gradient.ClampingOn()
-    if tf.gradient_opacity is not None:
-        gradient.AllowDuplicateScalarsOn()
-        for x, a in tf.gradient_opacity:
-            gradient.AddPoint(float(x), float(a))
-    else:  # no gradient opacity: constant 1 (VTK's default), which reads back as None
-        gradient.AddPoint(0.0, 1.0)
-        gradient.AddPoint(255.0, 1.0)
-    prop.SetScalarOpacityUnitDistance(0, float(tf.scalar_opacity_unit_distance))
-    prop.SetShade(0, int(bool(tf.shade)))
-    prop.SetAmbient(0, float(tf.ambient))
-    prop.SetDiffuse(0, float(tf.diffuse))
-    prop.SetSpecular(0, float(tf.specular))
-    prop.SetSpecularPower(0, float(tf.specular_power))
-    prop.SetInterpolationTypeToLinear()
-    prop.Modified()
-
-
+# the 3D view -------------------------------------------------------------------------------------------
 def find_vtk_volume(renderer):
     """The first visible vtkVolume of ``renderer`` (Slicer's ray-cast modes draw one per volume node).
 
@@ -290,13 +229,13 @@ def session_for(renderer, vtk_volume, array_kji: np.ndarray, ijk_to_ras: Any, mo
     :func:`preset_names`) is first written into the vtkVolume's property, placed on the voxels."""
     volume = volume_from_ijk_to_ras(array_kji, ijk_to_ras)
     if preset:
-        apply_transfer_function(vtk_volume.GetProperty(), preset_for(preset, volume))
+        write_volume_property(vtk_volume.GetProperty(), preset_for(preset, volume))
     return SlicerSession(renderer, vtk_volume, volume, model, **options)
 
 
 __all__: Sequence[str] = [
     "RAS_TO_LPS", "LPS_TO_RAS", "SLICER_OVERLAY_LAYER", "SCALES", "VARIANTS", "ras_to_lps", "lps_to_ras",
-    "ijk_to_lps", "matrix_4x4", "camera_ras_to_lps", "camera_lps_to_ras", "volume_from_ijk_to_ras",
-    "ijk_to_ras_of", "guess_units", "preset_for", "preset_names", "apply_transfer_function", "find_vtk_volume",
+    "ijk_to_lps", "camera_ras_to_lps", "camera_lps_to_ras", "volume_from_ijk_to_ras",
+    "ijk_to_ras_of", "guess_units", "preset_for", "preset_names", "find_vtk_volume",
     "SlicerSession", "session_for",
 ]

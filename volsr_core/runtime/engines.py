@@ -15,6 +15,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from volsr_core.errors import InputError
+from volsr_core.sr.history import stand_in_history
 
 METADATA_KEY = "volsr.network"  # the ONNX metadata entry holding the NetworkConfig as JSON
 PROVIDER_ORDER = ("TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExecutionProvider")
@@ -76,7 +77,7 @@ class OnnxEngine:
                  history: np.ndarray | None = None) -> np.ndarray:
         values = {"lr": lr, "motion": motion, "jitter": jitter}
         if self.config.takes_history:
-            values["history"] = _default_history(lr, self.config.scale) if history is None else history
+            values["history"] = stand_in_history(lr, self.config.scale) if history is None else history
         # the exporter drops inputs a configuration never reads (motion when N = 0 without recurrence)
         feed = {name: np.ascontiguousarray(values[name], dtype=np.float32) for name in self.input_names}
         return self.session.run(None, feed)[0]
@@ -102,14 +103,6 @@ class TorchEngine:
             args.append(torch.from_numpy(np.ascontiguousarray(history, dtype=np.float32)).to(self.device))
         with torch.no_grad():
             return self.model(*args).float().cpu().numpy()
-
-
-def _default_history(lr: np.ndarray, scale: int) -> np.ndarray:
-    """What the network stands in for a missing history: the current colour, bilinearly upscaled."""
-    from volsr_core.temporal.taau import upscale_bilinear
-
-    colour = np.moveaxis(lr[:, 0, :3], 1, -1)  # (B, h, w, 3)
-    return np.stack([np.moveaxis(upscale_bilinear(c, scale), -1, 0) for c in colour]).astype(np.float32)
 
 
 def open_engine(model: str | os.PathLike | Any, backend: str = "auto", device: str = "cpu", fp16: bool = False,

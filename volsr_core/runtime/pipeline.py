@@ -2,13 +2,15 @@
 
 The one object the CLI, the benchmark and every host use: it renders the LR frame with the next
 Halton jitter offset and motion vectors against the previous camera, and upscales it with a
-:class:`~volsr_core.runtime.upscaler.StatefulUpscaler`.
+:class:`~volsr_core.runtime.upscaler.StatefulUpscaler`. Hosts follow their scene with one call,
+:meth:`Pipeline.update`, before each :meth:`Pipeline.render`.
 """
 from __future__ import annotations
 
+import json
 import math
 import time
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -29,17 +31,22 @@ class Pipeline:
     - ``size``: output (width, height) in pixels; any size: the LR frame is ceil(size / scale)
       and the output is cropped to ``size``;
     - ``device``: "cpu" or "cuda", for the ray caster and the network;
-    - ``backend``: "auto" (by file type), "onnxruntime" or "torch".
+    - ``backend``: "auto" (by file type), "onnxruntime" or "torch";
+    - ``max_turn`` (degrees), ``max_zoom``: a camera that turned or zoomed further than this since
+      the last frame is a cut (:func:`~volsr_core.runtime.upscaler.camera_jump`).
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
-    rendering and upscaling that frame. Call :meth:`reset` on a camera cut (the upscaler also
-    resets by itself on implausible motion and on a new size).
+    rendering and upscaling that frame. :meth:`update` follows a changed volume, transfer function,
+    background or size; :meth:`reset` drops the history for the caller's own reasons (the upscaler
+    also drops it by itself on camera jumps, implausible motion and a new size). ``resets`` counts
+    the drops, ``last_reset_reason`` says why the last one happened.
     """
 
     def __init__(self, volume: Volume, transfer_function: TransferFunction, model: Any = None, *,
                  scale: int = 4, size: tuple[int, int] = (512, 512), variant: str = "S", device: str = "cpu",
                  backend: str = "auto", fp16: bool = False, threads: int | None = None,
-                 sample_distance: float | None = None, background: tuple[float, float, float] = (0.0, 0.0, 0.0)):
+                 sample_distance: float | None = None, background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 max_turn: float = 30.0, max_zoom: float = 2.0):
         if model is None:
             from volsr_core.runtime.models import model_file
 
@@ -49,9 +56,11 @@ class Pipeline:
             raise ValueError(f"the model upscales {self.engine.config.scale}x, not {scale}x")
         self.scale = int(scale)
         self._caster_options = {"sample_distance": sample_distance, "device": device}
-        self.caster = RayCaster(volume, transfer_function, background=background, **self._caster_options)
-        self.upscaler = StatefulUpscaler(self.engine)
+        self.caster = RayCaster(volume, transfer_function, background=tuple(float(c) for c in background),
+                                **self._caster_options)
+        self.upscaler = StatefulUpscaler(self.engine, max_turn=max_turn, max_zoom=max_zoom)
         self.size = (int(size[0]), int(size[1]))
+        self._tf_key = _tf_key(transfer_function)
         self.frame = 0
         self.previous_camera: Camera | None = None
         self.last_timings: dict[str, float] = {}
@@ -62,34 +71,46 @@ class Pipeline:
         """(width, height) of the rendered LR frame."""
         return math.ceil(self.size[0] / self.scale), math.ceil(self.size[1] / self.scale)
 
-    def resize(self, width: int, height: int) -> None:
-        """A new output size; the history starts afresh at the next frame."""
-        self.size = (int(width), int(height))
+    @property
+    def resets(self) -> int:
+        """How many times the history was dropped."""
+        return self.upscaler.resets
 
-    def set_volume(self, volume: Volume) -> None:
-        """A new volume (same transfer function and background); the history is dropped."""
-        caster = self.caster
-        self.caster = RayCaster(volume, caster.transfer_function, background=caster.background, **self._caster_options)
-        self.reset()
+    @property
+    def last_reset_reason(self) -> str:
+        return self.upscaler.last_reset_reason
 
-    def set_transfer_function(self, transfer_function: TransferFunction) -> None:
-        """A new transfer function; the history is dropped (old colours would bleed in)."""
-        self.caster.transfer_function = transfer_function
-        self.reset()
+    def update(self, *, volume: Volume | None = None, transfer_function: TransferFunction | None = None,
+               background: Sequence[float] | None = None, size: Sequence[int] | None = None) -> str | None:
+        """Follow the host: take each setting given that differs from the current one, then drop the
+        history once if any did. Returns why ("new volume", "new transfer function", "new background",
+        "new size", joined by ", ") or None when nothing changed; calling it again with the same
+        settings changes nothing. A volume is new when it is another object; a transfer function when
+        its definition differs; a background is RGB in [0, 1]; a size is (width, height) in pixels."""
+        changes = []
+        if volume is not None and volume is not self.caster.volume:
+            self.caster = RayCaster(volume, self.caster.transfer_function, background=self.caster.background,
+                                    **self._caster_options)
+            changes.append("new volume")
+        if transfer_function is not None and _tf_key(transfer_function) != self._tf_key:
+            self.caster.transfer_function = transfer_function
+            self._tf_key = _tf_key(transfer_function)
+            changes.append("new transfer function")
+        if background is not None and tuple(float(c) for c in background) != tuple(self.caster.background):
+            self.caster.background = tuple(float(c) for c in background)
+            changes.append("new background")
+        if size is not None and (int(size[0]), int(size[1])) != self.size:
+            self.size = (int(size[0]), int(size[1]))
+            changes.append("new size")
+        if not changes:
+            return None
+        reason = ", ".join(changes)
+        self.reset(reason)
+        return reason
 
-    def set_background(self, background: tuple[float, float, float]) -> bool:
-        """A new background colour (RGB in [0, 1]); the history is dropped if it differs. Returns
-        whether it did."""
-        background = tuple(float(c) for c in background)
-        if background == tuple(self.caster.background):
-            return False
-        self.caster.background = background
-        self.reset()
-        return True
-
-    def reset(self) -> None:
+    def reset(self, reason: str = "asked") -> None:
         """Forget previous frames (a camera cut): the next frame has no motion vectors or history."""
-        self.upscaler.reset()
+        self.upscaler.reset(reason)
         self.previous_camera = None
 
     def render(self, camera: Camera) -> np.ndarray:
@@ -108,3 +129,7 @@ class Pipeline:
         self.frame += 1
         return image
 
+
+def _tf_key(tf: TransferFunction) -> str:
+    """A transfer function's definition as text: equal texts, equal functions."""
+    return json.dumps(tf.to_dict(), sort_keys=True)

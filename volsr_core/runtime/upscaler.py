@@ -1,4 +1,8 @@
-"""StatefulUpscaler: one LR feature frame in, one HR frame out, the temporal history kept inside."""
+"""StatefulUpscaler: one LR feature frame in, one HR frame out, the temporal history kept inside.
+
+Every rule for dropping the history lives here: a new size, implausible motion and a camera jump
+(:func:`camera_jump`), besides :meth:`StatefulUpscaler.reset` for the caller's own reasons.
+"""
 from __future__ import annotations
 
 from collections import deque
@@ -7,7 +11,8 @@ from typing import Any
 import numpy as np
 
 from volsr_core.render.features import FeatureFrame
-from volsr_core.temporal.taau import TemporalUpsampler
+from volsr_core.scene.camera import Camera, rotation_between
+from volsr_core.sr.history import HistoryFeed
 
 BUFFERS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4}
 
@@ -21,40 +26,61 @@ def network_inputs(frame: FeatureFrame, features: tuple[str, ...]) -> np.ndarray
     return np.ascontiguousarray(np.concatenate(planes, axis=-1).transpose(2, 0, 1))
 
 
+def camera_jump(previous: Camera | None, camera: Camera, max_turn: float = 30.0, max_zoom: float = 2.0) -> str:
+    """Why ``camera`` is a cut from ``previous`` rather than a drag ("" when it is not): a switched
+    projection, a changed view angle, a turn of more than ``max_turn`` degrees, or a distance (parallel
+    scale) changed by more than ``max_zoom`` times."""
+    if previous is None:
+        return ""
+    if previous.parallel_projection != camera.parallel_projection:
+        return "projection switched"
+    if not camera.parallel_projection and abs(camera.view_angle - previous.view_angle) > 1e-9:
+        return "view angle changed"
+    if rotation_between(previous, camera) > max_turn:
+        return "camera turned"
+    ratio = (camera.parallel_scale / previous.parallel_scale if camera.parallel_projection
+             else camera.distance / previous.distance)
+    if max(ratio, 1.0 / ratio) > max_zoom:
+        return "zoom jump"
+    return ""
+
+
 class StatefulUpscaler:
     """Feeds an engine (:mod:`volsr_core.runtime.engines`) frame by frame, as a viewer renders them.
 
     ``upscale(frame)`` takes one LR :class:`FeatureFrame` (rendered with jitter and the previous
     camera, so its motion vectors point into the previous frame) and returns the (H, W, 3) float32
-    image in [0, 1], H = h * scale. It keeps the last N frames and, for recurrent networks, its
-    previous output; for TAAU-based networks it runs the :class:`TemporalUpsampler` whose
-    estimate the network refines. The history is dropped (the next frame starts afresh) when:
+    image in [0, 1], H = h * scale. It keeps the last N frames and the network's history
+    (:class:`~volsr_core.sr.history.HistoryFeed`: its previous output, or the TAAU estimate it
+    refines). The history is dropped (the next frame starts afresh) when:
 
     - fewer than N frames came before: the missing ones repeat the oldest frame held, with zero
       motion (a still camera), so the first frame works;
     - :meth:`reset` is called (a camera cut, a new volume or transfer function);
     - the LR size changes (a resized window);
+    - the camera jumped (:func:`camera_jump` with ``max_turn`` degrees and ``max_zoom``);
     - the motion is implausibly large: the median vector longer than ``max_motion`` times the
       frame's diagonal in LR pixels (a jump, not a drag), or more than ``max_offscreen`` of the
       pixels reprojecting off screen.
+
+    ``resets`` counts the drops and ``last_reset_reason`` says why the last one happened.
     """
 
-    def __init__(self, engine: Any, max_motion: float = 0.25, max_offscreen: float = 0.5):
+    def __init__(self, engine: Any, max_motion: float = 0.25, max_offscreen: float = 0.5, max_turn: float = 30.0,
+                 max_zoom: float = 2.0):
         self.engine = engine
         self.config = engine.config
         self.max_motion, self.max_offscreen = float(max_motion), float(max_offscreen)
+        self.max_turn, self.max_zoom = float(max_turn), float(max_zoom)
         self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=self.config.previous_frames + 1)
-        self.history: np.ndarray | None = None
-        self.taau = TemporalUpsampler(self.config.scale) if self.config.taau_base else None
-        self.resets = 0          # how many times the history was dropped
+        self.history = HistoryFeed(self.config)
+        self.resets = 0
         self.last_reset_reason = ""
 
     def reset(self, reason: str = "asked") -> None:
         """Forget every previous frame and output."""
         self.frames.clear()
-        self.history = None
-        if self.taau is not None:
-            self.taau.reset()
+        self.history.reset()
         self.resets += 1
         self.last_reset_reason = reason
 
@@ -69,13 +95,20 @@ class StatefulUpscaler:
             return "motion leaves the screen"
         return ""
 
+    def _cut(self, frame: FeatureFrame, inputs: np.ndarray) -> str:
+        """Why the history must go before ``frame`` ("" to keep it)."""
+        if self.frames[0][0].shape != inputs.shape:
+            return "size changed"
+        return (camera_jump(frame.previous_camera, frame.camera, self.max_turn, self.max_zoom)
+                or self._implausible(frame.motion))
+
     def upscale(self, frame: FeatureFrame) -> np.ndarray:
         """The HR image for ``frame`` (see the class); float32 (H, W, 3) in [0, 1]."""
         inputs = network_inputs(frame, self.config.features)
         motion = np.ascontiguousarray(frame.motion, dtype=np.float32).transpose(2, 0, 1)
         jitter = np.asarray(frame.jitter, dtype=np.float32)
         if self.frames:
-            reason = "size changed" if self.frames[0][0].shape != inputs.shape else self._implausible(frame.motion)
+            reason = self._cut(frame, inputs)
             if reason:
                 self.reset(reason)
         if not self.frames:
@@ -88,10 +121,9 @@ class StatefulUpscaler:
         lr = np.stack([f[0] for f in held])[None]
         vectors = np.stack([f[1] for f in held])[None]
         jitters = np.stack([f[2] for f in held])[None]
-        if self.taau is not None:  # TAAU's estimate of this frame (its vectors zero after a reset, as above)
-            estimate = self.taau(frame.color, motion.transpose(1, 2, 0), tuple(jitter))
-            self.history = np.ascontiguousarray(estimate.transpose(2, 0, 1)[None])
-        out = self.engine(lr, vectors, jitters, self.history)
-        if self.config.recurrent:
-            self.history = out
-        return np.clip(out[0].transpose(1, 2, 0), 0.0, 1.0)
+        history = self.history(frame.color, motion.transpose(1, 2, 0), tuple(jitter))  # (H, W, 3) or None
+        if history is not None:
+            history = np.ascontiguousarray(history.transpose(2, 0, 1)[None])
+        out = self.engine(lr, vectors, jitters, history)[0].transpose(1, 2, 0)
+        self.history.keep(out)
+        return np.clip(out, 0.0, 1.0)

@@ -241,3 +241,30 @@ class Camera:
             if key not in d:
                 raise ValueError(f"camera lacks '{key}'")
         return cls(**d)
+
+
+def rigid_matrix(matrix: Any) -> np.ndarray:
+    """``matrix`` as a 4x4 float64 array, checked to be a rotation (det +1) plus a translation."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0)):
+        raise ValueError(f"expected a 4x4 affine matrix, got shape {m.shape}")
+    r = m[:3, :3]
+    if not np.allclose(r.T @ r, np.eye(3), atol=1e-9) or np.linalg.det(r) < 0:
+        raise ValueError("the world matrix must be rigid: a rotation (det +1, no mirror, no scale) plus a translation")
+    return m
+
+
+def transform_camera(camera: Camera, matrix: Any) -> Camera:
+    """``camera`` carried by the rigid 4x4 ``matrix`` (position, focal point, view up); the image it
+    sees of a scene carried by the same matrix is unchanged."""
+    m = rigid_matrix(matrix)
+    r, t = m[:3, :3], m[:3, 3]
+    return replace(camera, position=r @ camera.position + t, focal_point=r @ camera.focal_point + t,
+                               view_up=r @ camera.view_up)
+
+
+def rotation_between(a: Camera, b: Camera) -> float:
+    """Angle in degrees of the rotation taking camera ``a``'s (right, up, forward) frame to ``b``'s."""
+    ra, rb = np.stack(a.basis()), np.stack(b.basis())
+    cos = (np.trace(rb @ ra.T) - 1.0) / 2.0
+    return math.degrees(math.acos(float(np.clip(cos, -1.0, 1.0))))

@@ -45,6 +45,16 @@ def orbit(start: Camera, n_frames: int, degrees: float = 360.0, elevation: float
     return [_turn(base, start.view_up, i * step) for i in range(n_frames)]
 
 
+def orbit_around(bounds: Bounds, n_frames: int, degrees_per_frame: float | None = None, elevation: float = 0.0,
+                 aspect: float = 1.0) -> list[Camera]:
+    """``n_frames`` cameras orbiting the volume in ``bounds`` from the anterior view that frames it
+    (:meth:`Camera.framing` at ``aspect``), ``degrees_per_frame`` apart (None: one full turn over the
+    frames), ``elevation`` degrees up, clipping ranges fitted to ``bounds``: the commands' ``--orbit``."""
+    degrees = 360.0 if degrees_per_frame is None else n_frames * degrees_per_frame
+    start = Camera.framing(bounds, aspect=aspect)
+    return [c.reset_clipping_range(bounds) for c in orbit(start, n_frames, degrees, elevation=elevation)]
+
+
 def _turn(camera: Camera, axis: np.ndarray, degrees: float) -> Camera:
     """Rotate position and view up about ``axis`` through the focal point (right-handed)."""
     r = _rotation(np.asarray(axis, dtype=np.float64), degrees)

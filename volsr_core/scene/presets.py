@@ -8,6 +8,7 @@ single transfer function. Names are matched case-insensitively. Every bad file g
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Iterable, Mapping
 from functools import lru_cache
@@ -171,3 +172,40 @@ def place_on_volume(tf: TransferFunction, volume: Volume, placement: str | tuple
         return tf if volume.units and volume.units == units else tf.placed_on(*volume.percentiles())
     low, high = placement
     return tf.placed_on(low, high)
+
+
+def parse_placement(text: str) -> str | tuple[float, float]:
+    """A placement as :func:`place_on_volume` takes it, from its command-line form: "auto", "none" or
+    "LO,HI" (finite numbers in the volume's value units, LO < HI); ValueError otherwise."""
+    if text in ("auto", "none"):
+        return text
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        lo, hi = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise ValueError(f"range must be auto, none or LO,HI, got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise ValueError(f"range needs finite LO and HI, got {text!r}")
+    if not hi > lo:
+        raise ValueError(f"range needs LO < HI, got {text!r}")
+    return lo, hi
+
+
+def default_preset_name(volume: Volume) -> str:
+    """The preset every command uses when none is named: CT-Phantom for VolSR's phantom, CT-Bone otherwise."""
+    return "CT-Phantom" if volume.source.startswith("phantom") else "CT-Bone"
+
+
+def choose_transfer_function(volume: Volume, preset: str | None = None, tf_file: str | os.PathLike | None = None,
+                             tf_name: str | None = None,
+                             placement: str | tuple[float, float] | None = "auto") -> TransferFunction:
+    """The transfer function a command's options ask for, placed on ``volume`` (:func:`place_on_volume`):
+    ``tf_file`` (entry ``tf_name``) when given, else the shipped ``preset``, else
+    :func:`default_preset_name`."""
+    if tf_file is not None:
+        tf = load_transfer_function(tf_file, name=tf_name)
+    else:
+        tf = get_preset(preset or default_preset_name(volume))
+    return place_on_volume(tf, volume, placement)

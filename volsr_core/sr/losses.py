@@ -50,7 +50,7 @@ def temporal_charbonnier(output: torch.Tensor, previous_output: torch.Tensor, ta
 
     The previous frames are backward-warped onto the current one with ``hr_motion`` (B, 2, H, W),
     HR pixels; pixels whose reprojection leaves the screen do not count. The training
-    counterpart of :func:`volsr_core.sr.evaluation.temporal_error` (which is an L1 mean).
+    counterpart of :func:`volsr_core.apps.evaluate.temporal_error` (which is an L1 mean).
     """
     from volsr_core.sr.network import backward_warp
 

@@ -335,19 +335,25 @@ def zero_upsample_folded(x: torch.Tensor, jitter: torch.Tensor, scale: int) -> t
 
 
 def run_unrolled(model: nn.Module, lr: torch.Tensor, motion: torch.Tensor, jitter: torch.Tensor,
-                 steps: int, previous_frames: int, recurrent: bool) -> list[torch.Tensor]:
-    """Run a network over ``steps`` consecutive frames, oldest first, each output the next one's history.
+                 steps: int, previous_frames: int, history_mode: str,
+                 taau: torch.Tensor | None = None) -> list[torch.Tensor]:
+    """Run a network over ``steps`` consecutive frames, oldest first, with the history
+    :func:`~volsr_core.sr.history.pick_history` picks for each step.
 
     ``lr``/``motion``/``jitter`` hold N + steps frames (index k = frame t-k, as for one call); the
-    step for frame t-i sees frames t-i .. t-i-N. Returns the outputs for t-steps+1 .. t. The first
-    step has no history (a cut); a non-recurrent network just runs once per frame. ``model`` may
-    be a DistributedDataParallel wrapper, hence the configuration passed apart.
+    step for frame t-i sees frames t-i .. t-i-N. ``taau`` (B, steps, 3, H, W), index i = frame t-i:
+    TAAU's estimate of each step's frame (for ``history_mode`` "taau"). A recurrent network's first
+    step has no history (a cut) and each output is the next step's history. Returns the outputs for
+    t-steps+1 .. t. ``model`` may be a DistributedDataParallel wrapper, hence the configuration
+    passed apart.
     """
+    from volsr_core.sr.history import pick_history
+
     outputs: list[torch.Tensor] = []
-    history = None
     for i in reversed(range(steps)):
         window = slice(i, i + previous_frames + 1)
         args = (lr[:, window], motion[:, window], jitter[:, window])
-        history = model(*args, history) if recurrent else model(*args)
-        outputs.append(history)
+        history = pick_history(history_mode, outputs[-1] if outputs else None,
+                               None if taau is None else taau[:, i])
+        outputs.append(model(*args, history) if history_mode != "none" else model(*args))
     return outputs

@@ -25,7 +25,8 @@ from torch.utils.data import DataLoader, Sampler
 from volsr_core.atomic import atomic_write
 from volsr_core.errors import InputError
 from volsr_core.sr.checkpoint import load_checkpoint, load_model, save_checkpoint
-from volsr_core.sr.dataset import SequenceDataset
+from volsr_core.sr.history import history_mode
+from volsr_core.sr.loader import SequenceDataset
 from volsr_core.sr.losses import ReconstructionLoss, temporal_charbonnier
 from volsr_core.sr.metrics import psnr_ssim
 from volsr_core.sr.network import NetworkConfig, SuperResolutionNet, run_unrolled, upsample_motion, variant_config
@@ -227,15 +228,12 @@ class Trainer:
         return float(loss.detach())
 
     def forward(self, model: torch.nn.Module, batch: dict[str, torch.Tensor]) -> list[torch.Tensor]:
-        """The outputs for the batch's last ``unroll`` frames, oldest first (recurrent: each feeds the next)."""
+        """The outputs for the batch's last ``unroll`` frames, oldest first (the history as
+        :mod:`volsr_core.sr.history` picks it: each step's TAAU frame, or the previous output)."""
         cfg = self.model.config
         lr, motion, jitter = (batch[k].to(self.device) for k in ("lr", "motion", "jitter"))
-        if cfg.taau_base:  # each step refines its own frame's TAAU estimate
-            taau = batch["taau"].to(self.device)
-            n = cfg.previous_frames
-            return [model(lr[:, i:i + n + 1], motion[:, i:i + n + 1], jitter[:, i:i + n + 1], taau[:, i])
-                    for i in reversed(range(self.unroll))]
-        return run_unrolled(model, lr, motion, jitter, self.unroll, cfg.previous_frames, cfg.recurrent)
+        taau = batch["taau"].to(self.device) if "taau" in batch else None
+        return run_unrolled(model, lr, motion, jitter, self.unroll, cfg.previous_frames, history_mode(cfg), taau)
 
     @torch.no_grad()
     def validate(self) -> dict[str, float]:

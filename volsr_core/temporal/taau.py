@@ -109,6 +109,12 @@ def resize_bilinear(image: np.ndarray, width: int, height: int) -> np.ndarray:
     return _resize(image, int(height), int(width), cubic=False)
 
 
+def resize_bicubic(image: np.ndarray, width: int, height: int, a: float = -0.5) -> np.ndarray:
+    """Like :func:`resize_bilinear` with Keys' cubic kernel (:func:`upscale_bicubic` at integer ratios);
+    not clamped."""
+    return _resize(image, int(height), int(width), cubic=True, a=a)
+
+
 def upscale_bilinear(lr: np.ndarray, scale: int) -> np.ndarray:
     """Bilinear upscaling of an (h, w[, C]) image by an integer ``scale``, float32.
 

@@ -5,9 +5,11 @@ SSIM from scikit-image against the HR ground truth, and a temporal-stability err
 absolute difference between the output's and the ground truth's frame-to-frame change after
 backward-warping frame t-1 onto t with the (upsampled) motion vectors, over pixels whose
 reprojection stays on screen. Lower is steadier; 0 means the output flickers exactly as the
-ground truth changes. TAAU runs over each whole video from frame 0, as it would live; a recurrent
-network runs over each video from frame N on, its first output without history; a TAAU-based
-network refines the same TAAU frames.
+ground truth changes. The baselines are :mod:`volsr_core.runtime.methods`' upscaling stages on the
+dataset's LR frames (bilinear and bicubic on each frame; TAAU over each whole video from frame 0, as
+it would live); the network gets its history from :class:`~volsr_core.sr.history.HistoryFeed` (fed
+from frame 0: a TAAU-based network refines the same TAAU frames; a recurrent one runs from frame N
+on, its first output without history).
 """
 from __future__ import annotations
 
@@ -21,10 +23,12 @@ import numpy as np
 import torch
 
 from volsr_core.atomic import atomic_write
-from volsr_core.sr.dataset import SequenceDataset
+from volsr_core.runtime.methods import ReducedSize, Taau
+from volsr_core.sr.history import HistoryFeed
+from volsr_core.sr.loader import SequenceDataset
 from volsr_core.sr.metrics import psnr_ssim
 from volsr_core.sr.network import SuperResolutionNet
-from volsr_core.temporal.taau import TemporalUpsampler, upscale_bicubic, upscale_bilinear
+from volsr_core.temporal.taau import upscale_bilinear
 from volsr_core.temporal.warp import backward_warp
 
 METHODS = ("bilinear", "bicubic", "TAAU", "VolSR")
@@ -54,10 +58,13 @@ class VideoFrames:
 
 
 def _baselines(video: VideoFrames, scale: int) -> dict[str, Callable[[int], np.ndarray]]:
-    taau = TemporalUpsampler(scale)
-    taau_frames = [taau(video.lr[t], video.motion[t], tuple(video.jitter[t])) for t in range(len(video.lr))]
-    return {"bilinear": lambda t: upscale_bilinear(video.lr[t], scale),
-            "bicubic": lambda t: np.clip(upscale_bicubic(video.lr[t], scale), 0.0, 1.0),
+    """Each baseline's frame t: the methods' upscaling stages on the stored LR frames."""
+    h, w = video.hr.shape[1:3]
+    bilinear, bicubic = (ReducedSize(None, (w, h), scale, kind) for kind in ("bilinear", "bicubic"))
+    taau = Taau(None, (w, h), scale)
+    taau_frames = [taau.upscale(video.lr[t], video.motion[t], tuple(video.jitter[t])) for t in range(len(video.lr))]
+    return {"bilinear": lambda t: bilinear.upscale(video.lr[t]),
+            "bicubic": lambda t: bicubic.upscale(video.lr[t]),
             "TAAU": lambda t: taau_frames[t]}
 
 
@@ -88,16 +95,22 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
         frames = VideoFrames(data.root / meta["file"], cfg.scale)
         methods = _baselines(frames, cfg.scale)
         network_out: dict[int, np.ndarray] = {}
-        history = None  # recurrent networks: the previous frame's output, from the video's first evaluated frame on
-        for index in indices:
-            item = data[index]
-            t = int(item["frame"])
+        feed = HistoryFeed(cfg)
+        samples = {data.samples[index][1]: index for index in indices}  # frame t -> sample
+        for t in range(len(frames.lr)):
+            history = feed(frames.lr[t], frames.motion[t], tuple(frames.jitter[t]))
+            if t not in samples:  # before frame N: only the history follows the video
+                continue
+            item = data[samples[t]]
             inputs = [item[k][None] for k in ("lr", "motion", "jitter")]
-            if cfg.taau_base:
-                history = torch.from_numpy(np.ascontiguousarray(methods["TAAU"](t).transpose(2, 0, 1)))[None]
-            out = model(*inputs, history) if cfg.takes_history else model(*inputs)
-            history = out if cfg.recurrent else history
+            if cfg.takes_history:
+                if history is not None:
+                    history = torch.from_numpy(np.ascontiguousarray(history.transpose(2, 0, 1)))[None]
+                out = model(*inputs, history)
+            else:
+                out = model(*inputs)
             network_out[t] = np.clip(out[0].permute(1, 2, 0).numpy(), 0.0, 1.0)
+            feed.keep(out[0].permute(1, 2, 0).numpy())
         methods["VolSR"] = network_out.__getitem__
         ts = sorted(network_out)
         video: dict[str, Any] = {"volume": meta["volume"], "frames": ts}

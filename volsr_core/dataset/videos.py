@@ -34,10 +34,10 @@ from volsr_core.scene.camera_paths import candidate_pool, random_start, smooth_r
 from volsr_core.scene.presets import place_on_volume
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
-from volsr_core.temporal.dataset_config import PHANTOM, SPLITS, DatasetConfig
+from volsr_core.dataset.config import PHANTOM, SPLITS, DatasetConfig
 from volsr_core.temporal.ground_truth import ground_truth_frames
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
-from volsr_core.temporal.store import (
+from volsr_core.dataset.store import (
     CAMERA_COLUMNS, MANIFEST_FORMAT, STORE_FORMAT, VERSION, StoreWriter, create_datasets, raw_bytes,
     read_json, store_layout, write_json,
 )
@@ -106,9 +106,9 @@ def parse_shard(text: str) -> tuple[int, int]:
     return int(match[1]), int(match[2])
 
 
-# scenes and cameras ------------------------------------------------------------------------------
+# volumes and cameras -------------------------------------------------------------------------------
 @dataclass
-class Scene:
+class DatasetVolume:
     """A loaded volume with its placed transfer function, ray caster and candidate pool."""
 
     name: str
@@ -118,7 +118,7 @@ class Scene:
     pool: list[Camera]
 
 
-def load_scene(config: DatasetConfig, volume_index: int, device: str = "cpu") -> Scene:
+def load_dataset_volume(config: DatasetConfig, volume_index: int, device: str = "cpu") -> DatasetVolume:
     """Load the volume ``volume_index`` of the config and place its transfer function on it:
     the design range onto ``range`` [lo, hi], ``auto`` as :func:`place_on_volume` (kept for HU
     presets on HU volumes, else onto the volume's 0.5-99.5 percentiles), kept without ``range``."""
@@ -134,15 +134,15 @@ def load_scene(config: DatasetConfig, volume_index: int, device: str = "cpu") ->
     n = pool_args.pop("pool_size")
     pool_args["distance_range"] = tuple(pool_args["distance_range"])
     pool = candidate_pool(volume.bounds, n, rng_for(config.seed, POOL_TAG, volume_index), **pool_args)
-    return Scene(spec.name, volume, tf, RayCaster(volume, tf, device=device), pool)
+    return DatasetVolume(spec.name, volume, tf, RayCaster(volume, tf, device=device), pool)
 
 
-def camera_path(config: DatasetConfig, scene: Scene, plan: VideoPlan) -> list[Camera]:
+def camera_path(config: DatasetConfig, source: DatasetVolume, plan: VideoPlan) -> list[Camera]:
     """The video's cameras: a random start from the volume's pool, then a smooth random path."""
     rng = rng_for(config.seed, VIDEO_TAG, plan.volume_index, plan.video_index)
-    start = random_start(scene.pool, rng)
+    start = random_start(source.pool, rng)
     args = {**config.path, "zoom_range": tuple(config.path["zoom_range"])}
-    return smooth_random_path(start, config.frames_per_video, rng, bounds=scene.volume.bounds, **args)
+    return smooth_random_path(start, config.frames_per_video, rng, bounds=source.volume.bounds, **args)
 
 
 def camera_row(camera: Camera) -> np.ndarray:
@@ -155,19 +155,19 @@ def camera_row(camera: Camera) -> np.ndarray:
 
 
 # rendering ---------------------------------------------------------------------------------------
-def render_frames(config: DatasetConfig, scene: Scene, cameras: list[Camera]) -> Iterator[dict[str, np.ndarray]]:
+def render_frames(config: DatasetConfig, source: DatasetVolume, cameras: list[Camera]) -> Iterator[dict[str, np.ndarray]]:
     """Per camera, the store's datasets for that frame (name -> array without the frame axis).
 
     The LR arrays are views into buffers reused by the next frame: store them before advancing.
     """
     width, height = config.hr_size
-    truth = ground_truth_frames(scene.caster, cameras, width, height, **config.ground_truth)
+    truth = ground_truth_frames(source.caster, cameras, width, height, **config.ground_truth)
     buffers: dict[int, np.ndarray | None] = dict.fromkeys(config.scales)
     for t, (camera, hr) in enumerate(zip(cameras, truth)):
         frame = {"hr/color": hr, "cameras": camera_row(camera)}
         for s in config.scales:
             jitter = halton_jitter(t, jitter_phases(s))
-            lr = scene.caster.render(camera, width // s, height // s, jitter=jitter,
+            lr = source.caster.render(camera, width // s, height // s, jitter=jitter,
                                      previous_camera=cameras[t - 1] if t else None, out=buffers[s])
             buffers[s] = lr.data
             frame.update({f"lr{s}/color": lr.color, f"lr{s}/alpha": lr.alpha, f"lr{s}/depth": lr.depth,
@@ -176,19 +176,19 @@ def render_frames(config: DatasetConfig, scene: Scene, cameras: list[Camera]) ->
         yield frame
 
 
-def write_video(config: DatasetConfig, scene: Scene, plan: VideoPlan, out: Path,
+def write_video(config: DatasetConfig, source: DatasetVolume, plan: VideoPlan, out: Path,
                 on_frame: Callable[[int], Any] = lambda n: None) -> dict[str, Any]:
     """Render one video into ``out/videos``: the store (via ``.part``), then its JSON entry; returns the entry."""
-    cameras = camera_path(config, scene, plan)
+    cameras = camera_path(config, source, plan)
     layout = store_layout(config.frames_per_video, config.hr_size, config.scales)
-    attrs = {"video": plan.id, "volume": scene.name, "format": STORE_FORMAT, "version": VERSION}
+    attrs = {"video": plan.id, "volume": source.name, "format": STORE_FORMAT, "version": VERSION}
     with StoreWriter(out / plan.file, layout, attrs) as writer:
-        for frame in render_frames(config, scene, cameras):
+        for frame in render_frames(config, source, cameras):
             writer.write_frame(frame)
             on_frame(1)
-    entry = {"id": plan.id, "file": plan.file, "volume": scene.name, "split": plan.split,
+    entry = {"id": plan.id, "file": plan.file, "volume": source.name, "split": plan.split,
              "frames": config.frames_per_video, "hr_size": list(config.hr_size), "scales": list(config.scales),
-             "transfer_function": scene.transfer_function.to_dict(), "cameras": [c.to_dict() for c in cameras],
+             "transfer_function": source.transfer_function.to_dict(), "cameras": [c.to_dict() for c in cameras],
              "ground_truth": dict(config.ground_truth), "checksums": writer.checksums,
              "fingerprint": plan.fingerprint}
     write_json(out / plan.entry, entry)
@@ -247,13 +247,13 @@ class Measurement:
         return self.first_frame_s + (frames - 1) * self.frame_s
 
 
-def measure(config: DatasetConfig, scene: Scene, cameras: list[Camera]) -> Measurement:
+def measure(config: DatasetConfig, source: DatasetVolume, cameras: list[Camera]) -> Measurement:
     """Render the first two frames of ``cameras`` as the generator does, timing each."""
-    scene.caster.render(cameras[0], 8, 8)  # compile (or load) the renderer outside the timing
+    source.caster.render(cameras[0], 8, 8)  # compile (or load) the renderer outside the timing
     layout = store_layout(1, config.hr_size, config.scales)
     seconds, ratio = [], 1.0
     start = time.perf_counter()
-    for frame in render_frames(config, scene, cameras[:2]):
+    for frame in render_frames(config, source, cameras[:2]):
         seconds.append(time.perf_counter() - start)
         ratio = _compression(layout, frame)
         start = time.perf_counter()
@@ -321,18 +321,18 @@ def generate(config: DatasetConfig, out: str | Path, shard: tuple[int, int] = (0
     mine = [p for p in plans if p.number % shard[1] == shard[0]]
     remove_stale_parts(out, shard)
     todo = [p for p in mine if not is_complete(out, p)]
-    scene = load_scene(config, todo[0].volume_index, device) if todo else None
-    measured = measure(config, scene, camera_path(config, scene, todo[0])) if scene else None
-    log(plan_text(config, plans, mine, todo, shard, measured, scene.name if scene else "", device))
+    source = load_dataset_volume(config, todo[0].volume_index, device) if todo else None
+    measured = measure(config, source, camera_path(config, source, todo[0])) if source else None
+    log(plan_text(config, plans, mine, todo, shard, measured, source.name if source else "", device))
     started = time.perf_counter()
     with tqdm(total=len(todo) * config.frames_per_video, unit="frame", desc="dataset", disable=not progress,
               file=sys.stderr) as bar:
         for plan in todo:
-            if scene.name != config.volumes[plan.volume_index].name:
-                scene = None  # free the previous volume before loading the next
-                scene = load_scene(config, plan.volume_index, device)
-            bar.set_postfix_str(f"{plan.id} {scene.name}")
-            write_video(config, scene, plan, out, bar.update)
+            if source.name != config.volumes[plan.volume_index].name:
+                source = None  # free the previous volume before loading the next
+                source = load_dataset_volume(config, plan.volume_index, device)
+            bar.set_postfix_str(f"{plan.id} {source.name}")
+            write_video(config, source, plan, out, bar.update)
             write_json(out / "manifest.json", build_manifest(config, out, plans, device))
     manifest = build_manifest(config, out, plans, device)
     write_json(out / "manifest.json", manifest)

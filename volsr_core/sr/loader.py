@@ -11,7 +11,8 @@ import torch
 from torch.utils.data import Dataset
 
 from volsr_core.errors import InputError
-from volsr_core.temporal.store import LR_BUFFERS, MANIFEST_FORMAT, read_json
+from volsr_core.dataset.store import LR_BUFFERS, MANIFEST_FORMAT, read_json
+from volsr_core.sr.history import taau_upsampler
 
 FEATURE_CHANNELS = {name: channels or 1 for name, channels in LR_BUFFERS.items()}
 SPLITS = ("train", "val", "test")
@@ -33,7 +34,7 @@ class SequenceDataset(Dataset):
       ground truth, for unrolling a recurrent network over T frames (``previous_frames`` must
       then count the N frames each step sees plus T - 1);
     - ``taau`` (T, 3, P, P), only with ``taau=True``: the TAAU estimates of the ``hr_frames``
-      frames t, t-1, ... (:class:`~volsr_core.temporal.taau.TemporalUpsampler` run over the video
+      frames t, t-1, ... (:func:`~volsr_core.sr.history.taau_upsampler` run over the video
       from frame 0 on the LR colour, motion and jitter; computed for every video when the
       dataset is made, so that forked loader workers inherit it);
     - ``video``, ``frame``: int64 scalars, the video's number and t (for debugging).
@@ -162,11 +163,9 @@ class SequenceDataset(Dataset):
     def _taau_frames(self, video_index: int) -> np.ndarray:
         """(T, H, W, 3) float32: TAAU over the whole video at this scale, computed once."""
         if video_index not in self._taau:
-            from volsr_core.temporal.taau import TemporalUpsampler
-
             h5, s = self._file(video_index), self.scale
             colour, motion, jitter = (h5[f"lr{s}/{k}"][()].astype(np.float32) for k in ("color", "motion", "jitter"))
-            upsampler = TemporalUpsampler(s)
+            upsampler = taau_upsampler(s)
             self._taau[video_index] = np.stack([upsampler(colour[t], motion[t], tuple(jitter[t]))
                                                 for t in range(len(colour))])
         return self._taau[video_index]

@@ -2,8 +2,9 @@
 
 - :func:`upscale_cameras` renders every camera with a :class:`~volsr_core.runtime.pipeline.Pipeline`
   and writes ``frame_NNNN.png`` (and optionally one MP4), either the upscaled image or, with
-  ``side_by_side``, three labelled panels: a native full-size 1-spp render, the LR frame upscaled
-  bilinearly (what VTK's ``ImageSampleDistance`` does) and VolSR;
+  ``side_by_side``, three labelled panels (:mod:`volsr_core.runtime.methods`): a native full-size
+  1-spp render, a native render at 1/scale size upscaled bilinearly (what VTK's
+  ``ImageSampleDistance`` does) and VolSR;
 - with ``reference_spp`` it also measures PSNR against an N-spp native render of every frame;
 - :func:`auto_variant` picks the largest shipped variant whose network time fits the frame budget
   (:func:`choose_variant` is the rule).
@@ -13,23 +14,21 @@ an interrupted run leaves complete files or none.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import statistics
-import tempfile
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator, Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from volsr_core.atomic import atomic_write
-from volsr_core.errors import VolSRError
+from volsr_core.images import mp4_writer, side_by_side, to_uint8, write_png
+from volsr_core.runtime.methods import Method, Native, ReducedSize, VolSR
 
 VARIANTS_LARGEST_FIRST = ("L", "M", "S")
 PANELS = ("native 1 spp", "bilinear", "VolSR")
-VIDEO_HINT = "install the video extra: pip install 'volsr[video]' (imageio, imageio-ffmpeg)"
 
 
 # -- inputs -----------------------------------------------------------------------------------------
@@ -174,85 +173,6 @@ def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: s
     return chosen, model_file(chosen, scale)
 
 
-# -- atomic outputs ---------------------------------------------------------------------------------
-@contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """A temporary path beside ``path`` (same suffix, so writers that go by the extension work) for a
-    writer that needs a file name; renamed to ``path`` on success, deleted on any failure."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_png(path: Path, rgb8: np.ndarray) -> None:
-    from PIL import Image
-
-    with atomic_write(path) as fh:
-        Image.fromarray(rgb8).save(fh, format="PNG")
-
-
-def require_video() -> None:
-    """Raise a one-line VolSRError unless imageio and imageio-ffmpeg are installed."""
-    try:
-        import imageio  # noqa: F401
-        import imageio_ffmpeg  # noqa: F401
-    except ImportError as err:
-        raise VolSRError(f"writing MP4 needs {err.name}: {VIDEO_HINT}") from None
-
-
-@contextmanager
-def mp4_writer(path: str | os.PathLike, fps: float = 24.0):
-    """An imageio writer (``append_data(rgb8)``) for an H.264 MP4 at ``path``, written atomically."""
-    require_video()
-    import imageio.v2 as imageio
-
-    with atomic_path(path) as tmp:
-        # macro_block_size=2: H.264 4:2:0 needs even sizes; odd ones are padded by one pixel, not resized to x16
-        writer = imageio.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=8,
-                                    macro_block_size=2, ffmpeg_log_level="error")
-        try:
-            yield writer
-        finally:
-            writer.close()
-
-
-# -- frames -----------------------------------------------------------------------------------------
-def to_uint8(image: np.ndarray) -> np.ndarray:
-    return np.clip(np.rint(np.asarray(image) * 255.0), 0, 255).astype(np.uint8)
-
-
-def labelled(rgb8: np.ndarray, text: str) -> np.ndarray:
-    """``rgb8`` with ``text`` in its top-left corner, white on a dark box."""
-    from PIL import Image, ImageDraw, ImageFont
-
-    image = Image.fromarray(rgb8)
-    size = max(8, min(28, rgb8.shape[0] // 20))
-    try:
-        font = ImageFont.load_default(size=size)
-    except (TypeError, OSError, ImportError):  # Pillow without FreeType: the fixed bitmap font
-        font = ImageFont.load_default()
-    draw = ImageDraw.Draw(image)
-    margin = max(2, size // 3)
-    left, top, right, bottom = draw.textbbox((margin, margin), text, font=font)
-    draw.rectangle((left - margin // 2, top - margin // 2, right + margin // 2, bottom + margin // 2), fill=(0, 0, 0))
-    draw.text((margin, margin), text, fill=(255, 255, 255), font=font)
-    return np.asarray(image)
-
-
-def side_by_side(panels: Sequence[tuple[str, np.ndarray]]) -> np.ndarray:
-    """The (label, float image) panels left to right, each labelled: (H, W * len(panels), 3) uint8."""
-    return np.concatenate([labelled(to_uint8(image), label) for label, image in panels], axis=1)
-
-
 # -- one input --------------------------------------------------------------------------------------
 @dataclass
 class InputSummary:
@@ -307,7 +227,6 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
     from tqdm import tqdm
 
     from volsr_core.temporal.supersample import render_supersampled
-    from volsr_core.temporal.taau import upscale_bilinear
 
     if reference_spp:
         from skimage.metrics import peak_signal_noise_ratio
@@ -318,30 +237,30 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
     summary.reference_spp = int(reference_spp)
     width, height = pipeline.size
     caster = pipeline.caster  # the same volume, transfer function, step and background as the LR frames
-    writer = mp4_writer(video, fps) if video is not None else _nothing()
-    with writer as mp4, \
-            tqdm(total=len(cameras), desc=summary.name, unit="frame", disable=not progress, leave=False) as bar:
+    methods: dict[str, Method] = {"VolSR": VolSR(pipeline)}
+    if side_by_side_panels or reference_spp:
+        methods["bilinear"] = ReducedSize(caster, pipeline.size, pipeline.scale, "bilinear")
+    if side_by_side_panels:
+        methods["native 1 spp"] = Native(caster, pipeline.size, 1)
+    with contextlib.ExitStack() as stack:
+        mp4 = stack.enter_context(mp4_writer(video, fps)) if video is not None else None
+        bar = stack.enter_context(tqdm(total=len(cameras), desc=summary.name, unit="frame", disable=not progress,
+                                       leave=False))
         for i, camera in enumerate(cameras):
-            image = pipeline.render(camera)
+            results = {name: method(camera).image for name, method in methods.items()}
             for stage, ms in pipeline.last_timings.items():
                 summary.timings[stage].append(ms)
-            results = {"VolSR": image}
-            if side_by_side_panels or reference_spp:
-                lr_color = pipeline.last_low_resolution.color
-                results["bilinear"] = upscale_bilinear(lr_color, pipeline.scale)[:height, :width]
-            if side_by_side_panels:
-                results["native 1 spp"] = caster.render(camera, width, height).color
             if reference_spp:
                 reference = render_supersampled(caster, camera, width, height, spp=reference_spp)
-                for method in ("VolSR", "bilinear", "native 1 spp"):
-                    if method in results:
-                        score = peak_signal_noise_ratio(reference, np.clip(results[method], 0, 1).astype(np.float32),
+                for name in ("VolSR", "bilinear", "native 1 spp"):
+                    if name in results:
+                        score = peak_signal_noise_ratio(reference, np.clip(results[name], 0, 1).astype(np.float32),
                                                         data_range=1.0)
-                        summary.psnr.setdefault(method, []).append(float(score))
+                        summary.psnr.setdefault(name, []).append(float(score))
             if side_by_side_panels:
                 frame = side_by_side([(label, results[label]) for label in PANELS])
             else:
-                frame = to_uint8(image)
+                frame = to_uint8(results["VolSR"])
             png = out_dir / f"frame_{i:04d}.png"
             write_png(png, frame)
             summary.outputs.append(png)
@@ -354,8 +273,3 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
     if video is not None:
         summary.outputs.append(Path(video))
     return summary
-
-
-@contextmanager
-def _nothing():
-    yield None

@@ -1,0 +1,243 @@
+"""Quality against time: native rendering, native + bilinear, TAAU and VolSR side by side.
+
+For each scene (a volume and its placed transfer function) the camera orbits ``frames`` frames of
+``degrees`` each (so temporal methods have history). Every method renders every frame, in one
+run, interleaved frame by frame (the order rotating per frame, so machine noise hits all alike):
+
+- ``native``: full size, ``spp`` jittered samples per pixel (1 = the pixel centres);
+- ``bilinear``: full size / ``factor`` (VTK's ImageSampleDistance), bilinearly upscaled;
+- ``taau``: full size / ``scale``, Halton-jittered, motion vectors, TAAU;
+- ``volsr``: :class:`~volsr_core.runtime.pipeline.Pipeline` for every model (variant, scale);
+
+all of them :mod:`volsr_core.runtime.methods`.
+
+Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per
+pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image). Quality is averaged over the
+frames after ``warmup`` warm-up frames; times are medians over the same frames (the warm-up also
+absorbs kernel compilation). ``ms_render`` is the ray casting, ``ms_network`` what follows it (the
+network for VolSR, the bilinear or TAAU upscaling for those, 0 for native), ``ms_total`` their sum.
+
+:func:`run_benchmark` runs it; :mod:`volsr_core.apps.bench.report` checks the targets
+(docs/performance.md) and writes bench.json, bench.md and bench.png; the volumes come from
+:mod:`volsr_core.apps.bench.scenes`. ``volsr bench`` is the command-line wrapper.
+"""
+from __future__ import annotations
+
+import math
+import os
+import platform
+import statistics
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numba
+import numpy as np
+
+from volsr_core.apps.bench.report import check_targets
+from volsr_core.apps.bench.scenes import BenchVolume, load_bench_volume
+from volsr_core.errors import InputError, require
+from volsr_core.render.raycaster import RayCaster
+from volsr_core.runtime.methods import Method, Native, ReducedSize, Taau, VolSR
+from volsr_core.scene.camera_paths import orbit_around
+
+SPP = (1, 2, 4)
+FACTORS = (2, 3, 4, 6, 8)
+SCALES = (2, 4, 8)
+VARIANTS = ("S", "M", "L")
+
+
+# -- models ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ModelSpec:
+    """An ONNX model file with the scale and variant its metadata says."""
+
+    path: Path
+    variant: str
+    scale: int
+
+
+def infer_variant(config) -> str | None:
+    """'S', 'M' or 'L' when ``config`` (a NetworkConfig) is that variant's shape, else None."""
+    from volsr_core.sr.network_config import variant_config
+
+    for name in VARIANTS:
+        try:
+            reference = variant_config(name, config.scale, config.previous_frames, config.features,
+                                       recurrent=config.recurrent, taau_base=config.taau_base)
+        except ValueError:
+            continue
+        if (reference.fold, reference.widths, reference.reweight_width, reference.feature_width) == (
+                config.fold, config.widths, config.reweight_width, config.feature_width):
+            return name
+    return None
+
+
+def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[str] = VARIANTS,
+                scales: Sequence[int] = SCALES) -> list[ModelSpec]:
+    """The models to benchmark, by scale then variant.
+
+    Without ``models_dir``: the shipped registry's (:func:`~volsr_core.runtime.models.shipped_models`,
+    SHA-256 checked). With it: every ``*.onnx`` in the folder, scale and variant read from the
+    model's metadata (:class:`OnnxEngine`); a model whose shape is no named variant goes by its file
+    name and is kept whatever ``variants`` says. Only ``scales`` are kept.
+    """
+    wanted = {v.upper() for v in variants}
+    found: list[ModelSpec] = []
+    if models_dir is None:
+        from volsr_core.runtime.models import model_file, shipped_models
+
+        for entry in shipped_models():
+            if entry["variant"] in wanted and entry["scale"] in scales and "onnx" in entry.get("files", {}):
+                found.append(ModelSpec(model_file(entry["variant"], entry["scale"], "onnx"), entry["variant"],
+                                       int(entry["scale"])))
+    else:
+        folder = Path(models_dir)
+        if not folder.is_dir():
+            raise InputError(folder, "is not a folder of .onnx models")
+        paths = sorted(folder.glob("*.onnx"))
+        if not paths:
+            raise InputError(folder, "holds no .onnx models")
+        require("onnxruntime", "VolSR models run in onnxruntime: pip install 'volsr[onnx]'")
+        from volsr_core.runtime.engines import OnnxEngine
+
+        for path in paths:
+            config = OnnxEngine(path, providers=["CPUExecutionProvider"]).config
+            variant = infer_variant(config)
+            if config.scale in scales and (variant is None or variant in wanted):
+                found.append(ModelSpec(path, variant or path.stem, int(config.scale)))
+    return sorted(found, key=lambda m: (m.scale, VARIANTS.index(m.variant) if m.variant in VARIANTS else 9,
+                                        str(m.path)))
+
+
+def build_methods(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int], spp: Sequence[int] = SPP,
+                  factors: Sequence[int] = FACTORS, scales: Sequence[int] = SCALES, models: Sequence[ModelSpec] = (),
+                  threads: int | None = 2, device: str = "cpu") -> list[Method]:
+    """Fresh methods (with their state: TAAU histories, VolSR pipelines) for one volume; native, bilinear
+    and TAAU share ``caster``."""
+    methods: list[Method] = [Native(caster, size, int(n)) for n in spp]
+    methods += [ReducedSize(caster, size, int(f), "bilinear") for f in factors]
+    methods += [Taau(caster, size, int(s)) for s in scales]
+    if models:
+        from volsr_core.runtime.pipeline import Pipeline
+
+        for spec in models:
+            pipeline = Pipeline(bench_volume.volume, bench_volume.transfer_function, spec.path, scale=spec.scale,
+                                size=size, device=device, threads=threads)
+            methods.append(VolSR(pipeline, spec.variant, spec.path.name))
+    return methods
+
+
+def _check_settings(size, frames, warmup, spp, factors, scales, reference_spp) -> None:
+    width, height = size
+    if frames < 1 or not 0 <= warmup < frames:
+        raise InputError(None, f"need frames >= 1 and 0 <= warm-up < frames, got {frames} frames, {warmup} warm-up")
+    if any(n < 1 or n >= reference_spp for n in spp):
+        raise InputError(None, f"native spp {list(spp)} must lie in 1..{reference_spp - 1} (below the reference's "
+                         f"{reference_spp} spp)")
+    if any(f < 2 for f in factors):
+        raise InputError(None, f"bilinear reduction factors must be at least 2, got {list(factors)}")
+    bad = [s for s in scales if s < 2 or width % s or height % s]
+    if bad:
+        raise InputError(None, f"size {width}x{height} must be divisible by every upscaling scale (so upscaled "
+                         f"frames align with the ground truth pixel for pixel); not by {bad}")
+
+
+# -- the benchmark --------------------------------------------------------------------------------
+def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int], methods: Sequence[Method],
+              cameras: Sequence, reference_spp: int = 16, warmup: int = 4, progress=None) -> list[dict[str, Any]]:
+    """Rows (one per method) for one volume; see the module docstring for what is measured."""
+    from volsr_core.sr.metrics import psnr_ssim
+    from volsr_core.temporal import render_supersampled
+
+    width, height = size
+    truth = []
+    for camera in cameras:
+        truth.append(render_supersampled(caster, camera, width, height, spp=reference_spp))
+        if progress is not None:
+            progress.update()
+    records = [{"render": [], "network": [], "psnr": [], "ssim": []} for _ in methods]
+    for t, camera in enumerate(cameras):
+        k = t % len(methods)
+        for i in list(range(k, len(methods))) + list(range(k)):
+            frame = methods[i](camera)
+            if t >= warmup:
+                psnr, ssim = psnr_ssim(frame.image[:height, :width], truth[t], channel_axis=-1)
+                rec = records[i]
+                rec["render"].append(frame.ms_render)
+                rec["network"].append(frame.ms_upscale)
+                rec["psnr"].append(psnr)
+                rec["ssim"].append(ssim)
+            if progress is not None:
+                progress.update()
+    rows = []
+    for method, rec in zip(methods, records):
+        total = [a + b for a, b in zip(rec["render"], rec["network"])]
+        rows.append({
+            "scene": bench_volume.label, "volume": bench_volume.name, "preset": bench_volume.preset,
+            "range": [float(v) for v in bench_volume.transfer_function.value_range],
+            "method": method.kind, "label": method.label, "scale": method.scale, "spp": method.spp,
+            "variant": method.variant, "model": method.model,
+            "ms_render": _finite(statistics.median(rec["render"])),
+            "ms_network": _finite(statistics.median(rec["network"])),
+            "ms_total": _finite(statistics.median(total)),
+            "psnr": _finite(float(np.mean(rec["psnr"]))), "ssim": _finite(float(np.mean(rec["ssim"]))),
+            "psnr_frames": [_finite(v) for v in rec["psnr"]],
+            "ms_total_frames": [_finite(v) for v in total],
+        })
+    return rows
+
+
+def _finite(value: float) -> float | None:
+    value = float(value)
+    return round(value, 4) if math.isfinite(value) else None
+
+
+def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, int] = (512, 512), *,
+                  frames: int = 12, degrees: float = 2.0, warmup: int = 4, reference_spp: int = 16,
+                  spp: Sequence[int] = SPP, factors: Sequence[int] = FACTORS, scales: Sequence[int] = SCALES,
+                  variants: Sequence[str] = VARIANTS, models_dir: str | os.PathLike | None = None,
+                  preset: str | None = None, placement: str | tuple[float, float] = "auto", threads: int | None = 2,
+                  device: str = "cpu", progress: bool = True) -> dict[str, Any]:
+    """Benchmark every volume (specs, :func:`~volsr_core.apps.bench.scenes.parse_volume_spec`; none: the phantom).
+
+    Returns ``{"settings", "machine", "models", "rows", "targets"}`` (what bench.json holds).
+    ``scales`` are TAAU's and the VolSR models' (``variants`` filters the models).
+    """
+    from tqdm import tqdm
+
+    require("skimage", "volsr bench measures PSNR and SSIM with scikit-image: pip install 'volsr[dev]'")
+    require("matplotlib", "volsr bench plots with matplotlib: pip install 'volsr[dev]'")
+    bad = [v for v in variants if v.upper() not in VARIANTS]
+    if bad:
+        raise InputError(None, f"variants must come from {', '.join(VARIANTS)}, got {', '.join(bad)}")
+    size = (int(size[0]), int(size[1]))
+    _check_settings(size, frames, warmup, spp, factors, scales, reference_spp)
+    specs = list(volumes) if volumes else [None]
+    models = find_models(models_dir, variants, scales)
+    volumes_ = [load_bench_volume(spec, preset, placement) for spec in specs]
+    n_methods = len(spp) + len(factors) + len(scales) + len(models)
+    rows: list[dict[str, Any]] = []
+    with tqdm(total=len(volumes_) * frames * (1 + n_methods), desc="bench", unit="render", disable=not progress) as bar:
+        for bench_volume in volumes_:
+            bar.set_postfix_str(bench_volume.name)
+            caster = RayCaster(bench_volume.volume, bench_volume.transfer_function, device=device)
+            methods = build_methods(bench_volume, caster, size, spp, factors, scales, models, threads, device)
+            cameras = orbit_around(bench_volume.volume.bounds, frames, degrees)
+            rows += bench_one(bench_volume, caster, size, methods, cameras, reference_spp, warmup, bar)
+
+    settings = {"size": list(size), "frames": frames, "degrees_per_frame": degrees, "warmup": warmup,
+                "measured_frames": frames - warmup, "reference_spp": reference_spp, "spp": list(spp),
+                "factors": list(factors), "scales": list(scales), "variants": [v.upper() for v in variants],
+                "models_dir": None if models_dir is None else str(models_dir), "onnxruntime_threads": threads,
+                "numba_threads": numba.get_num_threads(), "device": device}
+    machine = {"python": platform.python_version(), "platform": platform.platform(),
+               "processor": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+               "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+               "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+    return {"benchmark": "volsr-bench", "version": 1, "settings": settings, "machine": machine,
+            "models": [{"path": str(m.path), "variant": m.variant, "scale": m.scale} for m in models],
+            "rows": rows, "targets": check_targets(rows)}
+
+

@@ -1,0 +1,1 @@
+"""Training data: dataset configs, camera-path videos rendered to HDF5 stores, and their manifest."""

@@ -1,0 +1,195 @@
+"""The ways to make a full-size frame that VolSR is measured against, one object each: camera in, image out.
+
+Every method renders one frame per call along a camera path (the temporal ones keep their history)
+and returns a :class:`MethodFrame`: the (H, W, 3) float32 image in [0, 1] (H, W = ``size``) and the
+ms spent ray casting and upscaling.
+
+- :class:`Native`: full size, ``spp`` Halton-jittered samples per pixel averaged (1: the pixel
+  centres, no jitter);
+- :class:`ReducedSize`: round(size / ``factor``), pixel centres, no jitter, upscaled to full size by
+  bilinear interpolation (what VTK's ImageSampleDistance and 3D Slicer show while interacting) or
+  bicubic (the super-resolution papers' baseline);
+- :class:`Taau`: size / ``scale`` with Halton jitter and motion vectors, accumulated by the TAAU a
+  TAAU-based network refines (:func:`~volsr_core.sr.history.taau_upsampler`);
+- :class:`VolSR`: a :class:`~volsr_core.runtime.pipeline.Pipeline` (LR render + network).
+
+``volsr bench`` runs them side by side, ``volsr upscale --side-by-side`` draws them as panels, and
+``volsr eval`` uses their upscaling stages alone (:meth:`ReducedSize.upscale`, :meth:`Taau.upscale`)
+on the LR frames a dataset stores.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from volsr_core.render.features import FeatureFrame
+from volsr_core.render.raycaster import RayCaster
+from volsr_core.scene.camera import Camera
+from volsr_core.sr.history import taau_upsampler
+from volsr_core.temporal.jitter import halton_jitter, jitter_phases
+from volsr_core.temporal.supersample import render_supersampled
+from volsr_core.temporal.taau import resize_bicubic, resize_bilinear
+
+INTERPOLATIONS = ("bilinear", "bicubic")
+
+
+@dataclass
+class MethodFrame:
+    """One frame of a method: the image and where its time went (ms)."""
+
+    image: np.ndarray
+    ms_render: float
+    ms_upscale: float = 0.0
+    low_resolution: FeatureFrame | None = None  # the LR frame rendered, for methods that render one
+
+    @property
+    def ms_total(self) -> float:
+        return self.ms_render + self.ms_upscale
+
+
+class Method:
+    """Base of the comparison methods: ``method(camera)`` -> :class:`MethodFrame`; :meth:`reset` is a cut.
+
+    ``kind`` ("native", "bilinear", "bicubic", "taau", "volsr"), ``scale`` (the size reduction; 1 for
+    native), ``spp``, ``variant`` and ``model`` (VolSR) describe it; ``label`` names it in reports.
+    """
+
+    kind = ""
+    scale = 1
+    spp = 1
+    variant: str | None = None
+    model: str | None = None
+
+    def __init__(self, size: tuple[int, int]):
+        self.size = (int(size[0]), int(size[1]))
+
+    @property
+    def label(self) -> str:
+        raise NotImplementedError
+
+    def __call__(self, camera: Camera) -> MethodFrame:
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        """Forget the history (no-op for methods without one)."""
+
+
+def _elapsed_ms(since: float) -> float:
+    return 1000.0 * (time.perf_counter() - since)
+
+
+class Native(Method):
+    """Full size, ``spp`` Halton-jittered samples per pixel (:func:`render_supersampled`)."""
+
+    kind = "native"
+
+    def __init__(self, caster: RayCaster, size: tuple[int, int], spp: int = 1):
+        super().__init__(size)
+        self.caster, self.spp = caster, int(spp)
+
+    @property
+    def label(self) -> str:
+        return f"native {self.spp} spp"
+
+    def __call__(self, camera: Camera) -> MethodFrame:
+        started = time.perf_counter()
+        image = render_supersampled(self.caster, camera, *self.size, spp=self.spp)
+        return MethodFrame(image, _elapsed_ms(started))
+
+
+class ReducedSize(Method):
+    """round(size / ``factor``) pixels at their centres, upscaled to ``size`` by ``interpolation``."""
+
+    def __init__(self, caster: RayCaster | None, size: tuple[int, int], factor: int,
+                 interpolation: str = "bilinear"):
+        super().__init__(size)
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
+        self.caster, self.scale, self.kind = caster, int(factor), interpolation
+
+    @property
+    def label(self) -> str:
+        return f"native 1/{self.scale} size + {self.kind}"
+
+    @property
+    def low_resolution_size(self) -> tuple[int, int]:
+        return max(1, round(self.size[0] / self.scale)), max(1, round(self.size[1] / self.scale))
+
+    def upscale(self, colour: np.ndarray) -> np.ndarray:
+        """The upscaling stage alone: an (h, w, 3) colour image stretched over ``size`` (the same view at
+        every size, as VTK stretches a reduced rendering over the viewport); bicubic clipped to [0, 1]."""
+        width, height = self.size
+        if self.kind == "bilinear":
+            return resize_bilinear(colour, width, height)
+        return np.clip(resize_bicubic(colour, width, height), 0.0, 1.0)
+
+    def __call__(self, camera: Camera) -> MethodFrame:
+        started = time.perf_counter()
+        lr = self.caster.render(camera, *self.low_resolution_size)
+        rendered = time.perf_counter()
+        image = self.upscale(lr.color)
+        return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered), lr)
+
+
+class Taau(Method):
+    """size / ``scale``, Halton-jittered (``halton_jitter(frame, jitter_phases(scale))``), with motion
+    vectors to the previous camera, accumulated by :func:`~volsr_core.sr.history.taau_upsampler`."""
+
+    kind = "taau"
+
+    def __init__(self, caster: RayCaster | None, size: tuple[int, int], scale: int):
+        super().__init__(size)
+        self.caster, self.scale = caster, int(scale)
+        self.upsampler = taau_upsampler(self.scale)
+        self.frame = 0
+        self.previous: Camera | None = None
+
+    @property
+    def label(self) -> str:
+        return f"TAAU {self.scale}x"
+
+    def reset(self) -> None:
+        self.upsampler.reset()
+        self.previous = None
+
+    def upscale(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float]) -> np.ndarray:
+        """The accumulation stage alone: one jittered LR frame (colour, motion, jitter) in, (H, W, 3) out."""
+        return self.upsampler(colour, motion, jitter)
+
+    def __call__(self, camera: Camera) -> MethodFrame:
+        width, height = self.size
+        jitter = halton_jitter(self.frame, jitter_phases(self.scale))
+        started = time.perf_counter()
+        lr = self.caster.render(camera, width // self.scale, height // self.scale, jitter=jitter,
+                                previous_camera=self.previous)
+        rendered = time.perf_counter()
+        image = self.upscale(lr.color, lr.motion, lr.jitter)
+        self.frame += 1
+        self.previous = camera
+        return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered), lr)
+
+
+class VolSR(Method):
+    """The learned path: a :class:`~volsr_core.runtime.pipeline.Pipeline` renders and upscales."""
+
+    kind = "volsr"
+
+    def __init__(self, pipeline: Any, variant: str | None = None, model: str | None = None):
+        super().__init__(pipeline.size)
+        self.pipeline, self.scale = pipeline, int(pipeline.scale)
+        self.variant, self.model = variant, model
+
+    @property
+    def label(self) -> str:
+        return f"VolSR {self.variant} {self.scale}x"
+
+    def reset(self) -> None:
+        self.pipeline.reset()
+
+    def __call__(self, camera: Camera) -> MethodFrame:
+        image = self.pipeline.render(camera)
+        timings = self.pipeline.last_timings
+        return MethodFrame(image, timings["render_ms"], timings["network_ms"], self.pipeline.last_low_resolution)

@@ -1,0 +1,79 @@
+"""Where a network's ``history`` input comes from: decided here, once, for the upscaler, training and evaluation.
+
+A network (:class:`~volsr_core.sr.network_config.NetworkConfig`) takes one of three histories:
+
+- ``"none"``: no history input (the seed paper's network: only its N previous LR frames);
+- ``"recurrent"``: its own output for the previous frame (the network warps it to this frame);
+  none on the first frame after a cut;
+- ``"taau"``: TAAU's estimate of *this* frame (:func:`taau_upsampler`, run over every frame from
+  the cut on), which the network refines.
+
+:func:`pick_history` is the rule; :class:`HistoryFeed` applies it to a stream of frames (numpy,
+as the runtime and ``volsr eval`` run networks); training applies it to batches
+(:func:`~volsr_core.sr.network.run_unrolled`) with the TAAU frames the loader computed with the same
+:func:`taau_upsampler`. Torch-free, so that onnxruntime-only installs use it too.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from volsr_core.temporal.taau import TemporalUpsampler, upscale_bilinear
+
+HISTORY_MODES = ("none", "recurrent", "taau")
+
+
+def history_mode(config: Any) -> str:
+    """The history a network with ``config`` (a NetworkConfig) takes: one of :data:`HISTORY_MODES`."""
+    if config.recurrent:
+        return "recurrent"
+    return "taau" if config.taau_base else "none"
+
+
+def pick_history(mode: str, previous_output: Any, taau_estimate: Any) -> Any:
+    """The history to pass with this frame: None, the previous output (recurrent) or TAAU's estimate."""
+    if mode not in HISTORY_MODES:
+        raise ValueError(f"history mode must be one of {HISTORY_MODES}, got {mode!r}")
+    return {"none": None, "recurrent": previous_output, "taau": taau_estimate}[mode]
+
+
+def taau_upsampler(scale: int) -> TemporalUpsampler:
+    """The TAAU a TAAU-based network refines, its settings chosen here for training data, evaluation and
+    the runtime alike (a network sees at run time the TAAU it was trained on)."""
+    return TemporalUpsampler(scale)
+
+
+def stand_in_history(lr: np.ndarray, scale: int) -> np.ndarray:
+    """What stands in for a missing history (a recurrent network's first frame): the current colour,
+    bilinearly upscaled, (B, 3, H, W) float32 from ``lr`` (B, N+1, C, h, w) as the network takes it."""
+    colour = np.moveaxis(lr[:, 0, :3], 1, -1)  # (B, h, w, 3)
+    return np.stack([np.moveaxis(upscale_bilinear(c, scale), -1, 0) for c in colour]).astype(np.float32)
+
+
+class HistoryFeed:
+    """:func:`pick_history` over a stream of frames, one call per frame, numpy (H, W, 3) images.
+
+    ``feed(colour, motion, jitter)`` returns this frame's history (or None) and must see every
+    frame from the cut on (TAAU accumulates over all of them); ``feed.keep(output)`` hands it the
+    network's output for that frame (a recurrent network's next history). :meth:`reset` is a cut.
+    """
+
+    def __init__(self, config: Any):
+        self.mode = history_mode(config)
+        self.taau = taau_upsampler(config.scale) if self.mode == "taau" else None
+        self.previous: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self.previous = None
+        if self.taau is not None:
+            self.taau.reset()
+
+    def __call__(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float]) -> np.ndarray | None:
+        estimate = self.taau(colour, motion, jitter) if self.taau is not None else None
+        return pick_history(self.mode, self.previous, estimate)
+
+    def keep(self, output: np.ndarray) -> None:
+        """The network's output for the frame just fed, (H, W, 3)."""
+        if self.mode == "recurrent":
+            self.previous = output
