@@ -1,7 +1,7 @@
 """The same scene drawn by VTK's own volume mappers, offscreen: the reference VolSR is held to.
 
 Used by the renderer benchmarks and by the tests that compare VolSR's renderer with VTK's. VTK comes
-through :mod:`volsr_core.scene.vtk_bridge` (``vtkmodules``; offscreen windows use EGL unless
+through :mod:`volsr_core._vtk` (``vtkmodules``; offscreen windows use EGL unless
 ``VTK_DEFAULT_OPENGL_WINDOW`` says else).
 """
 from __future__ import annotations
@@ -13,9 +13,9 @@ import numpy as np
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
+from volsr_core._vtk import vtkMatrix4x4, vtkRenderer, vtkRenderWindow, vtkVolume
 from volsr_core.scene.vtk_bridge import (
-    apply_camera, image_data, placement_matrix, read_window, to_vtk_volume_property, volume_mapper, vtkMatrix4x4,
-    vtkRenderer, vtkRenderWindow, vtkVolume,
+    apply_camera, image_data, placement_matrix, read_window, to_vtk_volume_property, volume_mapper,
 )
 
 MAPPERS = ("gpu", "fixed_point")

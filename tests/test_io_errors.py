@@ -186,7 +186,8 @@ def test_vti_damaged_or_of_another_type_or_without_vtk(tmp_path, monkeypatch, ca
     (tmp_path / "poly.vti").write_text('<?xml version="1.0"?>\n<VTKFile type="PolyData" version="1.0"></VTKFile>\n')
     expect_error(tmp_path / "poly.vti", 'VTK XML "PolyData" file, not "ImageData"')
 
-    monkeypatch.setitem(sys.modules, "vtkmodules.vtkIOXML", None)  # import now fails, as without VTK
+    monkeypatch.setitem(sys.modules, "vtkmodules.vtkIOXML", None)  # import now fails, as without VTK ...
+    monkeypatch.setitem(sys.modules, "volsr_core._vtk", None)  # ... also when VolSR's VTK door was opened before
     expect_error(tmp_path / "v.vti", "reading .vti needs VTK: pip install 'volsr[vtk]'")
 
 

@@ -301,7 +301,7 @@ def test_core_modules_import_without_loading_vtk():
 
 
 @pytest.fixture(scope="module")
-def vtk_property():
+def vtk_bridge():
     pytest.importorskip("vtkmodules.vtkRenderingCore")
     from volsr_core.scene import vtk_bridge
     return vtk_bridge
@@ -324,11 +324,11 @@ def _assert_matches_vtk(tf: TransferFunction, prop) -> None:
 
 
 @pytest.mark.vtk
-def test_every_shipped_preset_round_trips_through_vtk_volume_property(vtk_property):
+def test_every_shipped_preset_round_trips_through_vtk_volume_property(vtk_bridge):
     for tf in _shipped():
-        prop = vtk_property.to_vtk_volume_property(tf)
+        prop = vtk_bridge.to_vtk_volume_property(tf)
         _assert_matches_vtk(tf, prop)
-        back = vtk_property.from_vtk_volume_property(prop, name=tf.name)
+        back = vtk_bridge.from_vtk_volume_property(prop, name=tf.name)
         np.testing.assert_array_equal(back.color, tf.color)
         np.testing.assert_array_equal(back.scalar_opacity, tf.scalar_opacity)
         if tf.has_gradient_opacity:
@@ -340,17 +340,17 @@ def test_every_shipped_preset_round_trips_through_vtk_volume_property(vtk_proper
 
 
 @pytest.mark.vtk
-def test_every_slicer_preset_evaluates_like_vtk(vtk_property, shared_data: Path):
+def test_every_slicer_preset_evaluates_like_vtk(vtk_bridge, shared_data: Path):
     for tf in read_slicer_presets(shared_data / "slicer-presets.xml").values():
-        _assert_matches_vtk(tf, vtk_property.to_vtk_volume_property(tf))
+        _assert_matches_vtk(tf, vtk_bridge.to_vtk_volume_property(tf))
 
 
 @pytest.mark.vtk
-def test_evaluation_matches_vtk_functions_with_steps_and_clamping(vtk_property):
+def test_evaluation_matches_vtk_functions_with_steps_and_clamping(vtk_bridge):
     tf = TransferFunction(color=[[-100, 0.2, 0.4, 0.6], [0, 1, 0, 0], [50, 0, 1, 0], [200, 0.1, 0.1, 0.9]],
                           scalar_opacity=[[-100, 0.1], [10, 0.1], [10, 0.8], [300, 0.3]],
                           gradient_opacity=[[5, 0.0], [25, 1.0]])
-    prop = vtk_property.to_vtk_volume_property(tf)
+    prop = vtk_bridge.to_vtk_volume_property(tf)
     _assert_matches_vtk(tf, prop)
     opacity, color = prop.GetScalarOpacity(0), prop.GetRGBTransferFunction(0)
     assert opacity.GetValue(9.999) == pytest.approx(0.1) and opacity.GetValue(10.001) == pytest.approx(0.8, abs=1e-4)
@@ -359,19 +359,19 @@ def test_evaluation_matches_vtk_functions_with_steps_and_clamping(vtk_property):
 
 
 @pytest.mark.vtk
-def test_vtk_default_and_constant_gradient_opacity_read_back_as_none(vtk_property):
+def test_vtk_default_and_constant_gradient_opacity_read_back_as_none(vtk_bridge):
     base = get_preset("CT-AAA")
     assert base.gradient_opacity is None
-    prop = vtk_property.to_vtk_volume_property(base)
+    prop = vtk_bridge.to_vtk_volume_property(base)
     assert not prop.HasGradientOpacity(0)  # VTK's own default is left in place
-    assert vtk_property.from_vtk_volume_property(prop).gradient_opacity is None
+    assert vtk_bridge.from_vtk_volume_property(prop).gradient_opacity is None
     constant = TransferFunction.from_dict({**base.to_dict(), "gradient_opacity": [[0, 1], [255, 1]]})
-    assert vtk_property.from_vtk_volume_property(
-        vtk_property.to_vtk_volume_property(constant)).gradient_opacity is None
+    assert vtk_bridge.from_vtk_volume_property(
+        vtk_bridge.to_vtk_volume_property(constant)).gradient_opacity is None
 
 
 @pytest.mark.vtk
-def test_grey_vtk_transfer_function_reads_as_equal_rgb(vtk_property):
+def test_grey_vtk_transfer_function_reads_as_equal_rgb(vtk_bridge):
     from vtkmodules.vtkCommonDataModel import vtkPiecewiseFunction
     from vtkmodules.vtkRenderingCore import vtkVolumeProperty
 
@@ -381,16 +381,16 @@ def test_grey_vtk_transfer_function_reads_as_equal_rgb(vtk_property):
     prop = vtkVolumeProperty()
     prop.SetColor(grey)
     prop.SetScalarOpacity(grey)
-    tf = vtk_property.from_vtk_volume_property(prop, name="grey")
+    tf = vtk_bridge.from_vtk_volume_property(prop, name="grey")
     np.testing.assert_array_equal(tf.color, [[0, 0.25, 0.25, 0.25], [100, 0.75, 0.75, 0.75]])
 
 
 @pytest.mark.vtk
-def test_non_linear_vtk_segments_are_refused(vtk_property):
-    prop = vtk_property.to_vtk_volume_property(get_preset("CT-Bone"))
+def test_non_linear_vtk_segments_are_refused(vtk_bridge):
+    prop = vtk_bridge.to_vtk_volume_property(get_preset("CT-Bone"))
     prop.GetScalarOpacity(0).AddPoint(100.0, 0.5, 0.3, 0.0)  # midpoint 0.3
     with pytest.raises(ValueError, match="midpoint"):
-        vtk_property.from_vtk_volume_property(prop)
+        vtk_bridge.from_vtk_volume_property(prop)
 
 
 def test_place_on_volume_keeps_hu_presets_on_hu_volumes_and_moves_them_otherwise():

@@ -67,7 +67,8 @@ def _prop_matrix(display) -> np.ndarray | None:
     position, orientation, scale, origin = (list(v) for v in values)
     if position == [0.0] * 3 and orientation == [0.0] * 3 and scale == [1.0] * 3:
         return None
-    from volsr_core.scene.vtk_bridge import matrix_4x4, vtkVolume
+    from volsr_core._vtk import vtkVolume
+    from volsr_core.scene.vtk_bridge import matrix_4x4
 
     prop = vtkVolume()  # the same transform maths as the representation's own prop
     prop.SetPosition(*position)
@@ -80,7 +81,8 @@ def _prop_matrix(display) -> np.ndarray | None:
 def volume_of(source, display=None) -> Volume:
     """Our :class:`Volume` for a ParaView source's vtkImageData output (its array coloured by ``display``, else
     the point scalars), placed by the image's geometry and the display's Position / Orientation / Scale."""
-    from volsr_core.scene.vtk_bridge import volume_from_image, vtkImageData
+    from volsr_core._vtk import vtkImageData
+    from volsr_core.scene.vtk_bridge import volume_from_image
 
     source.UpdatePipeline()
     image = source.GetClientSideObject().GetOutputDataObject(0)
@@ -150,7 +152,8 @@ def transfer_function_of(display, name: str = "") -> TransferFunction:
     lookup table in another colour space, on a log scale or with non-linear nodes is first sampled at 256
     values into a piecewise-linear RGB one (likewise the opacity function).
     """
-    from volsr_core.scene.vtk_bridge import from_vtk_volume_property, vtkVolumeProperty
+    from volsr_core._vtk import vtkVolumeProperty
+    from volsr_core.scene.vtk_bridge import from_vtk_volume_property
 
     lut, pwf = display.LookupTable, display.ScalarOpacityFunction
     if lut is None or pwf is None:
@@ -178,7 +181,7 @@ def transfer_function_of(display, name: str = "") -> TransferFunction:
 
 
 def _resampled_color(function):
-    from volsr_core.scene.vtk_bridge import vtkColorTransferFunction
+    from volsr_core._vtk import vtkColorTransferFunction
 
     lo, hi = function.GetRange()
     out = vtkColorTransferFunction()
@@ -189,7 +192,7 @@ def _resampled_color(function):
 
 
 def _resampled_opacity(function):
-    from volsr_core.scene.vtk_bridge import vtkPiecewiseFunction
+    from volsr_core._vtk import vtkPiecewiseFunction
 
     lo, hi = function.GetRange()
     out = vtkPiecewiseFunction()

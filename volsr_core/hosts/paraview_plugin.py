@@ -44,7 +44,7 @@ if _VENV is not None:
 _fix_python_plugins()
 
 from paraview.util.vtkAlgorithm import smdomain, smhint, smproperty, smproxy  # noqa: E402
-from vtkmodules.util.vtkAlgorithm import VTKPythonAlgorithmBase  # noqa: E402
+from volsr_core._vtk import VTKPythonAlgorithmBase  # noqa: E402
 
 _PRESETS = ("CT-Bone", "CT-AAA", "CT-Cardiac", "CT-Chest-Contrast-Enhanced", "CT-Soft-Tissue", "CT-Lung",
             "CT-Phantom", "MR-Default", "MR-Angio")
@@ -142,9 +142,7 @@ class VolSRUpscale(VTKPythonAlgorithmBase):
 
     # the pipeline passes ------------------------------------------------------------------------
     def RequestInformation(self, request, inInfoVec, outInfoVec):
-        from vtkmodules.vtkCommonCore import VTK_UNSIGNED_CHAR
-        from vtkmodules.vtkCommonDataModel import vtkDataObject
-        from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline as sddp
+        from volsr_core._vtk import VTK_UNSIGNED_CHAR, vtkDataObject, vtkStreamingDemandDrivenPipeline as sddp
 
         width, height = (max(int(v), 1) for v in self.upscaler.size)
         info = outInfoVec.GetInformationObject(0)
@@ -155,17 +153,14 @@ class VolSRUpscale(VTKPythonAlgorithmBase):
         return 1
 
     def RequestUpdateExtent(self, request, inInfoVec, outInfoVec):
-        from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline as sddp
+        from volsr_core._vtk import vtkStreamingDemandDrivenPipeline as sddp
 
         info = inInfoVec[0].GetInformationObject(0)  # the whole volume, whatever piece of the frame is asked for
         info.Set(sddp.UPDATE_EXTENT(), info.Get(sddp.WHOLE_EXTENT()), 6)
         return 1
 
     def RequestData(self, request, inInfoVec, outInfoVec):
-        from vtkmodules.util.numpy_support import numpy_to_vtk
-        from vtkmodules.vtkCommonCore import VTK_UNSIGNED_CHAR
-        from vtkmodules.vtkCommonDataModel import vtkImageData
-
+        from volsr_core._vtk import VTK_UNSIGNED_CHAR, numpy_to_vtk, vtkImageData
         from volsr_core.images import to_uint8
 
         volume = vtkImageData.GetData(inInfoVec[0], 0)

@@ -18,7 +18,8 @@ A scene whose world is not LPS (3D Slicer's RAS) passes ``world_matrix``, the ri
 world to LPS, which is applied to the cameras and to a volume read from VTK
 (volsr_core/hosts/slicer.py).
 
-VTK comes through :mod:`volsr_core.scene.vtk_bridge` (``vtkmodules``: Slicer's and ParaView's VTK serve).
+VTK comes through :mod:`volsr_core._vtk` and :mod:`volsr_core.scene.vtk_bridge` (``vtkmodules``: Slicer's and
+ParaView's VTK serve).
 Each render is "read the host -> :meth:`Pipeline.update` -> :meth:`Pipeline.render`"; the pipeline
 decides when the history goes. This class keeps only the overlay.
 """
@@ -29,14 +30,14 @@ from typing import Any
 
 import numpy as np
 
+from volsr_core._vtk import VTK_UNSIGNED_CHAR, numpy_to_vtk, vtkImageActor, vtkImageData, vtkRenderer
 from volsr_core.images import to_uint8
 from volsr_core.runtime.pipeline import Pipeline
 from volsr_core.scene.camera import Camera, rigid_matrix, transform_camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 from volsr_core.scene.vtk_bridge import (
-    VTK_UNSIGNED_CHAR, camera_from_vtk, from_vtk_volume_property, matrix_4x4, numpy_to_vtk, volume_from_image,
-    vtk_volume_input, vtkImageActor, vtkImageData, vtkRenderer,
+    camera_from_vtk, from_vtk_volume_property, matrix_4x4, volume_from_image, vtk_volume_input,
 )
 
 

@@ -150,8 +150,7 @@ def _sitk_message(err: RuntimeError) -> str:
 def _read_vti(path: Path) -> VolumeRecord:
     """VTK XML image data: the active point scalars (component 1) and the image geometry."""
     try:
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-        from vtkmodules.vtkIOXML import vtkXMLImageDataReader
+        from volsr_core._vtk import vtk_to_numpy, vtkXMLImageDataReader
     except ImportError:
         raise InputError(path, _VTK_NEEDED) from None
     reader = vtkXMLImageDataReader()
@@ -206,7 +205,7 @@ def _vtk_errors() -> Iterator[list[str]]:
     Temporarily swaps VTK's global output window for a string window and mutes the VTK
     logger's stderr output, restoring both afterwards (not thread-safe, as VTK's globals are not).
     """
-    from vtkmodules.vtkCommonCore import vtkLogger, vtkOutputWindow, vtkStringOutputWindow
+    from volsr_core._vtk import vtkLogger, vtkOutputWindow, vtkStringOutputWindow
 
     previous_window = vtkOutputWindow.GetInstance()
     previous_verbosity = vtkLogger.GetCurrentVerbosityCutoff()

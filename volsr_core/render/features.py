@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from volsr_core.atomic import atomic_write
+from volsr_core.images import to_uint8
 from volsr_core.render.layout import (
     OUT_ALPHA, OUT_CHANNELS, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA, OUT_MOTION, OUT_POSITION,
 )
@@ -74,7 +75,7 @@ class FeatureFrame:
 
     def to_uint8(self) -> np.ndarray:
         """The colour as an (H, W, 3) uint8 image, ready for PNG."""
-        return np.clip(np.rint(self.color * 255.0), 0, 255).astype(np.uint8)
+        return to_uint8(self.color)
 
     def save_npz(self, path: str | os.PathLike) -> None:
         """Write every buffer to a compressed .npz, atomically (temporary name, then rename)."""

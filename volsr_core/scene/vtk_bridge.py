@@ -1,10 +1,4 @@
-"""VolSR's one door to VTK: every ``vtkmodules`` import of volsr_core is here, and the conversions.
-
-As PyVista's ``plotting/_vtk.py`` does, this module imports what VolSR uses of VTK (from
-``vtkmodules``, so 3D Slicer's and ParaView's own VTK serve; never a pip-only path) and, outside
-3D Slicer and ParaView, makes EGL the default offscreen window (``VTK_DEFAULT_OPENGL_WINDOW``, unless
-already set) once, when first imported. Inside a host application the host's window class stays.
-The core imports without VTK: only hosts, benchmarks and tests import this module.
+"""VTK <-> VolSR conversions, the scene's side of the one VTK boundary (:mod:`volsr_core._vtk` imports VTK).
 
 Conversions, all in VolSR's world (LPS millimetres; docs/conventions.md):
 
@@ -23,34 +17,21 @@ Conversions, all in VolSR's world (LPS millimetres; docs/conventions.md):
 from __future__ import annotations
 
 import math
-import os
-import sys
 from typing import Any
 
 import numpy as np
 
+from volsr_core._vtk import (
+    numpy_to_vtk, vtk_to_numpy, vtkColorTransferFunction, vtkFixedPointVolumeRayCastMapper, vtkImageData,
+    vtkOpenGLGPUVolumeRayCastMapper, vtkPiecewiseFunction, vtkRenderer, vtkRenderWindow, vtkVolume,
+    vtkVolumeProperty, vtkWindowToImageFilter,
+)
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 
-if not any(host in sys.modules for host in ("slicer", "paraview")):
-    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-
-from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy  # noqa: E402
-from vtkmodules.vtkCommonCore import VTK_UNSIGNED_CHAR  # noqa: E402
-from vtkmodules.vtkCommonDataModel import vtkImageData, vtkPiecewiseFunction  # noqa: E402
-from vtkmodules.vtkCommonMath import vtkMatrix4x4  # noqa: E402
-from vtkmodules.vtkRenderingCore import (  # noqa: E402
-    vtkColorTransferFunction, vtkImageActor, vtkRenderer, vtkRenderWindow, vtkVolume, vtkVolumeProperty,
-    vtkWindowToImageFilter,
-)
-import vtkmodules.vtkRenderingOpenGL2  # noqa: E402,F401  (registers the OpenGL window factories)
-import vtkmodules.vtkRenderingVolumeOpenGL2  # noqa: E402,F401  (registers the volume mapper factories)
-
 __all__ = [
-    "VTK_UNSIGNED_CHAR", "numpy_to_vtk", "vtk_to_numpy", "vtkColorTransferFunction", "vtkImageActor", "vtkImageData",
-    "vtkMatrix4x4", "vtkPiecewiseFunction", "vtkRenderWindow", "vtkRenderer", "vtkVolume", "vtkVolumeProperty",
-    "vtkWindowToImageFilter", "matrix_4x4", "image_data", "placement_matrix", "image_index_to_world",
+    "matrix_4x4", "image_data", "placement_matrix", "image_index_to_world",
     "volume_from_image", "vtk_volume_input", "volume_mapper", "camera_from_vtk", "apply_camera",
     "to_vtk_volume_property", "write_volume_property", "from_vtk_volume_property", "read_window",
 ]
@@ -150,12 +131,8 @@ def volume_mapper(kind: str):
     """A new VTK volume mapper: "gpu" (vtkOpenGLGPUVolumeRayCastMapper) or "fixed_point"
     (vtkFixedPointVolumeRayCastMapper, VTK's CPU ray caster)."""
     if kind == "gpu":
-        from vtkmodules.vtkRenderingVolumeOpenGL2 import vtkOpenGLGPUVolumeRayCastMapper
-
         return vtkOpenGLGPUVolumeRayCastMapper()
     if kind == "fixed_point":
-        from vtkmodules.vtkRenderingVolume import vtkFixedPointVolumeRayCastMapper
-
         return vtkFixedPointVolumeRayCastMapper()
     raise ValueError(f"mapper must be 'gpu' or 'fixed_point', got {kind!r}")
 
