@@ -149,3 +149,56 @@ def test_a_taau_based_upscaler_runs_taau_and_starts_as_it():
         frame = feature_frame(rng, jitter=(0.2 * k - 0.3, 0.1), motion=0.0 if k == 0 else 0.4)
         expected = taau(frame.color, np.asarray(frame.motion) * (k > 0), frame.jitter)
         assert np.allclose(upscaler.upscale(frame), np.clip(expected, 0, 1), atol=1e-5)
+
+
+def test_pipeline_update_is_the_one_sync_point_idempotent_with_reasons(tmp_path):
+    from volsr_core.io import make_phantom
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.scene import Volume, get_preset
+
+    volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
+    model = export_onnx(perturbed(variant_config("S", 4, 0, taau_base=True)), tmp_path / "m.onnx")
+    tf = get_preset("CT-Phantom")
+    pipeline = Pipeline(volume, tf, model, scale=4, size=(32, 32))
+    camera = Camera.framing(volume.bounds)
+    pipeline.render(camera)
+    same = dict(volume=volume, transfer_function=get_preset("CT-Phantom"), background=(0, 0, 0), size=(32, 32))
+    assert pipeline.update(**same) is None and pipeline.resets == 0, "equal settings (a new but equal TF) keep it"
+    assert pipeline.previous_camera is camera
+    other_tf = tf.placed_on(-500.0, 1500.0)
+    assert pipeline.update(transfer_function=other_tf, size=(40, 24)) == "new transfer function, new size"
+    assert pipeline.resets == 1 and pipeline.previous_camera is None and pipeline.size == (40, 24)
+    assert pipeline.update(transfer_function=other_tf, size=(40, 24)) is None, "a second identical call changes nothing"
+    copy = Volume.from_record(make_phantom(shape=(32, 32, 32)))
+    assert pipeline.update(volume=copy) == "new volume" and pipeline.caster.volume is copy
+    assert pipeline.caster.transfer_function is other_tf, "a new volume keeps the transfer function"
+    assert pipeline.render(camera).shape == (24, 40, 3)
+
+
+def test_camera_jump_names_cuts_and_lets_drags_through():
+    from volsr_core.runtime.upscaler import camera_jump
+
+    start = Camera(position=[0, -100, 0], focal_point=[0, 0, 0], view_up=[0, 0, 1])
+    assert camera_jump(None, start) == ""
+    assert camera_jump(start, start.azimuth(5)) == ""
+    assert camera_jump(start, start.azimuth(31)) == "camera turned"
+    assert camera_jump(start, start.azimuth(31), max_turn=45) == ""
+    assert camera_jump(start, start.dolly(2.5)) == "zoom jump" and camera_jump(start, start.dolly(1.5)) == ""
+    import dataclasses
+
+    assert camera_jump(start, dataclasses.replace(start, view_angle=20.0)) == "view angle changed"
+    assert camera_jump(start, dataclasses.replace(start, parallel_projection=True)) == "projection switched"
+
+
+def test_the_upscaler_drops_the_history_on_a_camera_jump_in_its_frames():
+    engine = TorchEngine(perturbed(variant_config("S", 4, 1, recurrent=True)))
+    rng = np.random.default_rng(4)
+    start = Camera(position=[0, -100, 0], focal_point=[0, 0, 0], view_up=[0, 0, 1])
+    upscaler = StatefulUpscaler(engine, max_turn=30.0)
+    first = feature_frame(rng)
+    first.camera = start
+    upscaler.upscale(first)
+    turned = feature_frame(rng, motion=0.2)
+    turned.camera, turned.previous_camera = start.azimuth(60), start
+    assert np.allclose(upscaler.upscale(turned), StatefulUpscaler(engine).upscale(turned), atol=1e-6)
+    assert upscaler.last_reset_reason == "camera turned" and upscaler.resets == 1
