@@ -1,36 +1,49 @@
 """VolSR: learned super-resolution of the volume in 3D Slicer's 3D view (scripted module).
 
-Slicer's template: ``VolSR`` (module), ``VolSRWidget`` (GUI, Resources/UI/VolSR.ui), ``VolSRLogic``
-(works without the GUI), ``VolSRTest`` (self-test, run by "Reload and Test" or ctest).
+Slicer's template: ``VolSRParameterNode`` (the module's settings, kept in the scene's parameter node
+and saved with the scene), ``VolSR`` (module), ``VolSRWidget`` (GUI, Resources/UI/VolSR.ui, bound to
+the parameter node), ``VolSRLogic`` (works from a parameter node, or from plain arguments, without
+the GUI), ``VolSRTest`` (self-test, run by "Reload and Test" or ctest).
 
 The work is done by ``volsr_core.hosts.slicer`` (no Slicer in it, tested outside Slicer): the VTK
 adapter draws the 3D view's vtkVolume at 1/scale of the view and upscales it, in an overlay
 renderer on layer 3; Slicer's RAS world is converted to VolSR's LPS (x and y change sign) for the
-volume (IJK-to-RAS) and the camera. ``volsr_core`` is imported from an installed ``volsr`` or from
-the source checkout this folder belongs to; its Python dependencies (Resources/requirements.txt)
-are installed at first use. See docs/slicer.md.
+volume (IJK-to-RAS) and the camera. ``VolSRLib.bootstrap`` installs VolSR's Python dependencies
+(Resources/requirements.txt) at first use and imports ``volsr_core`` from an installed ``volsr`` or
+from the source checkout this folder belongs to. See docs/slicer.md.
 
-Outside Slicer this file still imports (the Slicer classes get stand-in bases and are unusable);
-``slicer``, ``qt`` and ``ctk`` are used only inside the Slicer-only classes.
+Outside Slicer this file still imports (the Slicer names get stand-ins and the classes are
+unusable), with this folder on ``sys.path`` as Slicer puts it there; ``slicer``, ``qt``, ``ctk`` and
+``vtk`` are used only inside the Slicer-only classes. No ``from __future__ import annotations``:
+``slicer.parameterNodeWrapper`` reads the parameter node's annotations as objects.
 """
-from __future__ import annotations
-
-import importlib
-import importlib.util
 import logging
-import os
-import re
 import sys
 import unittest
 from pathlib import Path
+from typing import Annotated
+
+if sys.version_info < (3, 10):  # volsr_core and the annotations below (X | None) need it
+    raise ImportError("VolSR needs Python 3.10 or newer (Slicer 5.8 or later); this Slicer has Python "
+                      f"{sys.version_info.major}.{sys.version_info.minor}")
+
+from VolSRLib import bootstrap  # after the version check
 
 try:
     import slicer
+except ImportError:  # outside 3D Slicer
+    slicer = None
+
+if slicer is not None:
+    import vtk
+    from slicer import vtkMRMLScalarVolumeNode
+    from slicer.parameterNodeWrapper import Choice, parameterNodeWrapper
     from slicer.ScriptedLoadableModule import (
         ScriptedLoadableModule, ScriptedLoadableModuleLogic, ScriptedLoadableModuleTest, ScriptedLoadableModuleWidget,
     )
-except ImportError:  # outside 3D Slicer: only the plain helpers below are usable
-    slicer = None
+    from slicer.util import VTKObservationMixin
+else:  # stand-ins, so that the classes below can be defined and inspected
+    vtk = None
 
     class ScriptedLoadableModule:  # noqa: D101  (stand-in base outside Slicer)
         def __init__(self, parent=None):
@@ -46,93 +59,57 @@ except ImportError:  # outside 3D Slicer: only the plain helpers below are usabl
 
     ScriptedLoadableModuleTest = unittest.TestCase
 
+    class VTKObservationMixin:  # noqa: D101
+        pass
 
-MODULE_DIR = Path(__file__).resolve().parent
-REQUIREMENTS = MODULE_DIR / "Resources" / "requirements.txt"
+    class vtkMRMLScalarVolumeNode:  # noqa: D101
+        pass
+
+    class Choice:
+        """``slicer.parameterNodeWrapper.Choice``: the values a parameter may take."""
+
+        def __init__(self, choices):
+            self.choices = choices
+
+    def parameterNodeWrapper(classtype):
+        """``slicer.parameterNodeWrapper``: in Slicer it makes the class wrap a parameter node."""
+        return classtype
+
+
 KEEP_PRESET = "Slicer's own"
-# shown before volsr_core can be imported (its dependencies are installed when VolSR is first switched on)
-FALLBACK_PRESETS = ("CT-AAA", "CT-Bone", "CT-Cardiac", "CT-Chest-Contrast-Enhanced", "CT-Lung", "CT-Phantom",
-                    "CT-Soft-Tissue", "MR-Angio", "MR-Default")
+# volsr_core.hosts.slicer's preset_names(), SCALES and VARIANTS, and volsr_core.render.raycaster's DEVICES,
+# spelled out: they are needed before volsr_core can be imported (tests/test_slicer_module.py compares them)
+PRESETS = ("CT-Bone", "CT-AAA", "CT-Cardiac", "CT-Chest-Contrast-Enhanced", "CT-Soft-Tissue", "CT-Lung",
+           "CT-Phantom", "MR-Default", "MR-Angio")
+SCALES = (2, 4, 8)
+VARIANTS = ("S", "M", "L")
+DEVICES = ("cpu", "cuda")
 
 
-# plain helpers (no Slicer) -----------------------------------------------------------------------
-def requirementLines(path: Path = REQUIREMENTS) -> list[str]:
-    """The requirement specifiers of Resources/requirements.txt (comments and blank lines dropped)."""
-    lines = []
-    for line in Path(path).read_text(encoding="utf-8").splitlines():
-        line = line.split("#", 1)[0].strip()
-        if line:
-            lines.append(line)
-    return lines
+#
+# VolSRParameterNode
+#
+@parameterNodeWrapper
+class VolSRParameterNode:
+    """VolSR's settings, kept in the scene's VolSR parameter node (a vtkMRMLScriptedModuleNode, saved with
+    the scene). Widgets of VolSR.ui whose ``SlicerParameterName`` names a setting follow it both ways.
 
-
-def requirementName(spec: str) -> str:
-    """The distribution name of a specifier, normalised ("PyYAML>=6" -> "pyyaml")."""
-    name = re.split(r"[\s<>=!~;\[]", spec, maxsplit=1)[0]
-    return re.sub(r"[-_.]+", "-", name).lower()
-
-
-def missingRequirements(specs: list[str]) -> list[str]:
-    """The specifiers whose distribution is not installed at all (versions are pip's business)."""
-    from importlib import metadata
-
-    missing = []
-    for spec in specs:
-        try:
-            metadata.version(requirementName(spec))
-        except metadata.PackageNotFoundError:
-            missing.append(spec)
-    return missing
-
-
-def sourceCheckout(moduleFile: str | os.PathLike = __file__) -> Path | None:
-    """The VolSR source checkout this module folder lies in (``Path(moduleFile).parents[1]``), if any."""
-    root = Path(moduleFile).resolve().parents[1]
-    return root if (root / "volsr_core" / "__init__.py").is_file() else None
-
-
-def importVolsrCore(moduleFile: str | os.PathLike = __file__):
-    """``volsr_core``: installed (pip), else from the source checkout next to this module.
-
-    From a checkout the repository root goes on ``sys.path``, and ``volsr_core.resources`` (which
-    setup.py maps to the checkout's ``resources/``: presets, models) is registered from there.
+    inputVolume - the scalar volume VolSR draws in the first 3D view (volume rendering is switched on for it).
+    preset - the VolSR preset written into the volume's volume property node; KEEP_PRESET keeps Slicer's own.
+    scale - upscaling factor: the volume is ray cast at 1/scale of the view's width and height.
+    variant - network size: S (fastest), M, L (best).
+    device - where the ray caster and the network run.
+    modelPath - an .onnx/.pt model file; "" for the shipped model of the variant at the scale.
+    enabled - VolSR draws the 3D view (True) or Slicer does (False).
     """
-    try:
-        return importlib.import_module("volsr_core")
-    except ImportError:
-        root = sourceCheckout(moduleFile)
-        if root is None:
-            raise ImportError("volsr_core is neither installed (pip install volsr) nor in a source checkout around "
-                              f"{Path(moduleFile).resolve().parent}") from None
-        if str(root) not in sys.path:
-            sys.path.insert(0, str(root))
-        importlib.invalidate_caches()
-        core = importlib.import_module("volsr_core")
-    if "volsr_core.resources" not in sys.modules:
-        try:
-            importlib.import_module("volsr_core.resources")
-        except ImportError:
-            resources = Path(core.__file__).resolve().parents[1] / "resources"
-            if not (resources / "__init__.py").is_file():
-                raise ImportError(f"volsr_core's resources are missing ({resources})") from None
-            spec = importlib.util.spec_from_file_location("volsr_core.resources", resources / "__init__.py",
-                                                          submodule_search_locations=[str(resources)])
-            module = importlib.util.module_from_spec(spec)
-            sys.modules["volsr_core.resources"] = module
-            spec.loader.exec_module(module)
-            core.resources = module
-    return core
 
-
-def presetNames() -> list[str]:
-    """VolSR's preset names (the fixed list while volsr_core cannot be imported yet)."""
-    try:
-        importVolsrCore()
-        from volsr_core.scene.presets import list_presets
-
-        return list(list_presets())
-    except Exception:  # dependencies not installed yet
-        return list(FALLBACK_PRESETS)
+    inputVolume: vtkMRMLScalarVolumeNode
+    preset: Annotated[str, Choice((KEEP_PRESET, *PRESETS))] = KEEP_PRESET
+    scale: Annotated[int, Choice(SCALES)] = 4
+    variant: Annotated[str, Choice(VARIANTS)] = "S"
+    device: Annotated[str, Choice(DEVICES)] = "cpu"
+    modelPath: str = ""
+    enabled: bool = False
 
 
 #
@@ -160,18 +137,21 @@ class VolSR(ScriptedLoadableModule):
 #
 # VolSRWidget
 #
-class VolSRWidget(ScriptedLoadableModuleWidget):
-    """GUI: input volume, preset, scale, variant, on/off and the frame time of the last VolSR frame."""
+class VolSRWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
+    """GUI bound to the scene's VolSRParameterNode: input volume, preset, scale, variant, device, model file
+    and on/off. Every change of the parameter node is applied by ``VolSRLogic.apply``; the panel also
+    shows the frame time of the last VolSR frame."""
 
     def __init__(self, parent=None):
         ScriptedLoadableModuleWidget.__init__(self, parent)
+        VTKObservationMixin.__init__(self)  # observes the scene and the parameter node
         self.logic = None
         self.ui = None
+        self._parameterNode = None
+        self._parameterNodeGuiTag = None
         self._timer = None
-        self._sceneObservers = []
-        self._updating = False
 
-    def setup(self):
+    def setup(self) -> None:
         import ctk
         import qt
 
@@ -182,116 +162,97 @@ class VolSRWidget(ScriptedLoadableModuleWidget):
         uiWidget.setMRMLScene(slicer.mrmlScene)
         self.logic = VolSRLogic()
 
-        self.ui.presetComboBox.addItem(KEEP_PRESET)
-        for name in presetNames():
-            self.ui.presetComboBox.addItem(name)
+        # Slicer binds a ctkPathLineEdit to a pathlib.Path only, whose empty value reads ".": the model
+        # file is bound by hand (onModelPathChanged, onParameterNodeModified); the rest by connectGui
         self.ui.modelPathLineEdit.filters = ctk.ctkPathLineEdit.Files
         self.ui.modelPathLineEdit.nameFilters = ["VolSR models (*.onnx *.pt)"]
+        self.ui.modelPathLineEdit.connect("currentPathChanged(QString)", self.onModelPathChanged)
 
-        self.ui.enableCheckBox.connect("toggled(bool)", self.onEnableToggled)
-        self.ui.inputSelector.connect("currentNodeChanged(vtkMRMLNode*)", self.onSettingsChanged)
-        self.ui.presetComboBox.connect("currentIndexChanged(int)", self.onPresetChanged)
-        for combo in (self.ui.scaleComboBox, self.ui.variantComboBox, self.ui.deviceComboBox):
-            combo.connect("currentIndexChanged(int)", self.onSettingsChanged)
-        self.ui.modelPathLineEdit.connect("currentPathChanged(QString)", self.onSettingsChanged)
-
+        self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent, self.onSceneStartClose)
+        self.addObserver(slicer.mrmlScene, slicer.mrmlScene.EndCloseEvent, self.onSceneEndClose)
         self._timer = qt.QTimer()
-        self._timer.setInterval(500)
+        self._timer.setInterval(500)  # ms: the frame time is refreshed twice a second while the module is shown
         self._timer.connect("timeout()", self.updateFrameTime)
-        self._sceneObservers = [
-            slicer.mrmlScene.AddObserver(slicer.mrmlScene.StartCloseEvent, self.onSceneStartClose)]
-        self.updateFrameTime()
+        self.initializeParameterNode()  # also after "Reload"
 
-    def cleanup(self):
+    def cleanup(self) -> None:
+        """The module is reloaded or Slicer closes: observers removed, VolSR off."""
         if self._timer is not None:
             self._timer.stop()
-        for tag in self._sceneObservers:
-            slicer.mrmlScene.RemoveObserver(tag)
-        self._sceneObservers = []
+        self.removeObservers()
         if self.logic is not None:
             self.logic.cleanup()
 
-    def enter(self):
-        if self._timer is not None:
-            self._timer.start()
+    def enter(self) -> None:
+        self.initializeParameterNode()
+        self._timer.start()
         self.updateFrameTime()
 
-    def exit(self):
-        if self._timer is not None:
-            self._timer.stop()
+    def exit(self) -> None:
+        """Leaving the module: the GUI lets go of the parameter node; VolSR stays as it is."""
+        self._timer.stop()
+        self.setParameterNode(None)
 
-    # settings --------------------------------------------------------------------------------------
-    def settings(self) -> dict:
-        path = self.ui.modelPathLineEdit.currentPath.strip()
-        preset = self.ui.presetComboBox.currentText
-        return {"scale": int(self.ui.scaleComboBox.currentText), "variant": self.ui.variantComboBox.currentText,
-                "model": path or None, "device": self.ui.deviceComboBox.currentText,
-                "preset": None if preset == KEEP_PRESET else preset}
+    # the parameter node ------------------------------------------------------------------------------
+    def initializeParameterNode(self) -> None:
+        """Bind the GUI to the scene's VolSR parameter node (created when missing); pick the first scalar
+        volume when none is chosen."""
+        self.setParameterNode(self.logic.getParameterNode())
+        if self._parameterNode.inputVolume is None:
+            firstVolume = slicer.mrmlScene.GetFirstNodeByClass("vtkMRMLScalarVolumeNode")
+            if firstVolume is not None:
+                self._parameterNode.inputVolume = firstVolume
 
-    def setChecked(self, on: bool):
-        self._updating = True
-        try:
-            self.ui.enableCheckBox.checked = on
-        finally:
-            self._updating = False
+    def setParameterNode(self, parameterNode: VolSRParameterNode | None) -> None:
+        """Bind the GUI to ``parameterNode`` (None: to nothing) and observe it, applying it at once."""
+        if self._parameterNode is not None:
+            self._parameterNode.disconnectGui(self._parameterNodeGuiTag)
+            self.removeObserver(self._parameterNode, vtk.vtkCommand.ModifiedEvent, self.onParameterNodeModified)
+        self._parameterNode = parameterNode
+        self._parameterNodeGuiTag = None
+        if parameterNode is not None:
+            self._parameterNodeGuiTag = parameterNode.connectGui(self.ui)
+            self.addObserver(parameterNode, vtk.vtkCommand.ModifiedEvent, self.onParameterNodeModified)
+            self.onParameterNodeModified()
 
-    def start(self) -> bool:
+    def onParameterNodeModified(self, caller=None, event=None) -> None:
+        """The model file field and the 3D view follow the parameter node; a failure is shown (VolSRLogic.apply
+        has then switched VolSR off and unticked ``enabled``)."""
         import qt
 
-        node = self.ui.inputSelector.currentNode()
-        if node is None:
-            self.ui.statusLabel.text = "Choose an input volume first."
-            return False
-        try:
-            slicer.app.setOverrideCursor(qt.Qt.WaitCursor)
-            try:
-                self.logic.enable(node, **self.settings())
-            finally:
-                slicer.app.restoreOverrideCursor()
-        except Exception as err:
-            logging.exception("VolSR could not start")
-            self.ui.statusLabel.text = f"Not started: {err}"
-            slicer.util.errorDisplay(f"VolSR could not start: {err}")
-            return False
-        self.ui.statusLabel.text = ""
-        if self._timer is not None:
-            self._timer.start()
-        return True
-
-    # slots -------------------------------------------------------------------------------------------
-    def onEnableToggled(self, on):
-        if self._updating:
+        if self._parameterNode is None:
             return
-        if on:
-            if not self.start():
-                self.setChecked(False)
-        else:
-            self.logic.disable()
+        modelPath = self._parameterNode.modelPath
+        if self.ui.modelPathLineEdit.currentPath != modelPath:
+            self.ui.modelPathLineEdit.currentPath = modelPath
+        error = None
+        slicer.app.setOverrideCursor(qt.Qt.WaitCursor)
+        try:
+            self.logic.apply(self._parameterNode)
+        except Exception as err:
+            logging.exception("VolSR: the settings could not be applied")
+            error = err
+        finally:
+            slicer.app.restoreOverrideCursor()
+        self.ui.statusLabel.text = "" if error is None else f"Not applied: {error}"
+        if error is not None:
+            slicer.util.errorDisplay(f"VolSR: {error}")
         self.updateFrameTime()
 
-    def onSettingsChanged(self, *args):
-        if self._updating or not self.logic.enabled:
-            return
-        if not self.start():
-            self.logic.disable()
-            self.setChecked(False)
-        self.updateFrameTime()
+    def onModelPathChanged(self, path: str) -> None:
+        if self._parameterNode is not None:
+            self._parameterNode.modelPath = path.strip()
 
-    def onPresetChanged(self, index):
-        node = self.ui.inputSelector.currentNode()
-        name = self.ui.presetComboBox.currentText
-        if self._updating or node is None or name == KEEP_PRESET:
-            return
-        try:
-            self.logic.applyPreset(node, name)
-        except Exception as err:
-            self.ui.statusLabel.text = f"Preset not applied: {err}"
+    def onSceneStartClose(self, caller, event) -> None:
+        """The scene (and its parameter node) goes away: let go of it, VolSR off."""
+        self.setParameterNode(None)
+        self.logic.cleanup()
 
-    def onSceneStartClose(self, caller, event):
-        self.logic.disable()
-        self.setChecked(False)
+    def onSceneEndClose(self, caller, event) -> None:
+        if self.parent.isEntered:
+            self.initializeParameterNode()
 
-    def updateFrameTime(self):
+    def updateFrameTime(self) -> None:
         if self.ui is not None and self.logic is not None:
             self.ui.frameTimeLabel.text = self.logic.statusText()
 
@@ -299,52 +260,69 @@ class VolSRWidget(ScriptedLoadableModuleWidget):
 #
 # VolSRLogic
 #
-class VolSRLogic(ScriptedLoadableModuleLogic):
+class VolSRLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
     """Switches VolSR on and off for a volume node in a 3D view; no GUI needed.
 
-    ``enable(volumeNode, scale=4, variant="S")`` shows the node with volume rendering (if it was
-    not), attaches VolSR to the 3D view's first renderer and returns the
-    ``volsr_core.hosts.slicer.SlicerSession``; ``disable()`` gives the view back to Slicer.
+    ``apply(parameters)`` makes the 3D view show what a VolSRParameterNode says (the scene's own:
+    ``getParameterNode()``). ``enable(volumeNode, scale=4, variant="S")`` does it from plain arguments:
+    it shows the node with volume rendering (if it was not), attaches VolSR to the 3D view's first
+    renderer and returns the ``volsr_core.hosts.slicer.SlicerSession``; ``disable()`` gives the view
+    back to Slicer.
     """
 
     def __init__(self, parent=None):
         ScriptedLoadableModuleLogic.__init__(self, parent)
+        VTKObservationMixin.__init__(self)  # observes the volume node VolSR draws
         self.session = None
         self.volumeNode = None
         self.viewIndex = 0
-        self._nodeObservations = []
-        self._dependenciesChecked = False
+        self.parameters = None  # the VolSRParameterNode apply() last followed
+        self._settings = None  # enable()'s arguments VolSR was last started with by apply()
+        self._preset = None  # (volume node, preset name) apply() last wrote
 
-    # dependencies ------------------------------------------------------------------------------------
+    def getParameterNode(self) -> VolSRParameterNode:
+        """The scene's VolSR parameter node (created with the defaults when missing), typed."""
+        return VolSRParameterNode(super().getParameterNode())
+
     def ensureDependencies(self) -> None:
-        """Install what Resources/requirements.txt lists and is missing (asking first), then import volsr_core."""
-        if self._dependenciesChecked:
-            return
-        if sys.version_info < (3, 10):
-            raise RuntimeError("VolSR needs Python 3.10 or newer (Slicer 5.8 or later); this Slicer has Python "
-                               f"{sys.version_info.major}.{sys.version_info.minor}")
-        specs = requirementLines()
-        try:
-            import slicer.packaging as packaging
+        """VolSR's Python packages installed (asking first) and volsr_core importable (VolSRLib.bootstrap)."""
+        bootstrap.ensureDependencies()
 
-            ensure = packaging.pip_ensure
-        except (ImportError, AttributeError):  # Slicer before slicer.packaging (5.9)
-            ensure = None
-        if ensure is not None:
-            ensure(packaging.load_requirements(str(REQUIREMENTS)), requester="VolSR")
-        else:
-            missing = missingRequirements(specs)
-            if missing and (slicer.app.testingEnabled() or slicer.util.confirmOkCancelDisplay(
-                    "VolSR needs these Python packages, which will be installed now:\n" + "\n".join(missing),
-                    windowTitle="VolSR")):
-                for spec in missing:  # one at a time: older pip_install splits its argument at spaces
-                    slicer.util.pip_install(spec)
-        missing = missingRequirements(specs)
-        if missing:
-            raise RuntimeError("missing Python packages: " + ", ".join(missing)
-                               + f" (install them with slicer.util.pip_install, see {REQUIREMENTS})")
-        importVolsrCore()
-        self._dependenciesChecked = True
+    # the parameter node ------------------------------------------------------------------------------
+    @staticmethod
+    def settingsFrom(parameters: VolSRParameterNode) -> dict:
+        """``enable()``'s arguments from ``parameters`` (an empty model path: None, the shipped model)."""
+        return {"volumeNode": parameters.inputVolume, "scale": parameters.scale, "variant": parameters.variant,
+                "model": parameters.modelPath.strip() or None, "device": parameters.device}
+
+    def apply(self, parameters: VolSRParameterNode):
+        """Make the 3D view show what ``parameters`` say; returns the SlicerSession (None when off).
+
+        The preset is written when it or the input volume changed (not for KEEP_PRESET). VolSR is
+        (re)started when ``enabled`` and the settings differ from those it runs with, and switched off
+        when not ``enabled``. Whenever VolSR is not running afterwards, ``parameters.enabled`` is set
+        False (the GUI and the saved scene say so), and the error, if any, is raised.
+        """
+        self.parameters = parameters
+        try:
+            node = parameters.inputVolume
+            preset = None if node is None or parameters.preset == KEEP_PRESET else (node, parameters.preset)
+            if preset != self._preset:
+                self._preset = preset  # first: a failing preset is not retried until it or the volume changes
+                if preset is not None:
+                    self.applyPreset(*preset)
+            wanted = self.settingsFrom(parameters) if parameters.enabled else None
+            if wanted != (self._settings if self.enabled else None):
+                self.disable()
+                if wanted is not None:
+                    if node is None:
+                        raise ValueError("choose an input volume first")
+                    self.enable(**wanted)
+                    self._settings = wanted
+        finally:
+            if parameters.enabled and not self.enabled:
+                parameters.enabled = False
+        return self.session
 
     # the 3D view -------------------------------------------------------------------------------------
     def threeDView(self, viewIndex: int | None = None):
@@ -387,7 +365,6 @@ class VolSRLogic(ScriptedLoadableModuleLogic):
     def ijkToWorld(self, volumeNode):
         """4x4 IJK-to-world (RAS) of the node: its IJK-to-RAS after its parent transform (linear only)."""
         import numpy as np
-        import vtk
 
         from volsr_core.scene.vtk_bridge import matrix_4x4
 
@@ -473,18 +450,19 @@ class VolSRLogic(ScriptedLoadableModuleLogic):
         return "off" if self.session is None else self.session.status_text()
 
     def cleanup(self) -> None:
+        """VolSR off, and the parameter node forgotten (the scene closes or the module is unloaded)."""
         self.disable()
+        self.parameters = None
+        self._preset = None
 
     # following the node ------------------------------------------------------------------------------
     def _observeNode(self, node) -> None:
         for event in (slicer.vtkMRMLVolumeNode.ImageDataModifiedEvent,
                       slicer.vtkMRMLTransformableNode.TransformModifiedEvent):
-            self._nodeObservations.append((node, node.AddObserver(event, self._onNodeChanged)))
+            self.addObserver(node, event, self._onNodeChanged)
 
     def _unobserveNode(self) -> None:
-        for node, tag in self._nodeObservations:
-            node.RemoveObserver(tag)
-        self._nodeObservations = []
+        self.removeObservers(self._onNodeChanged)
 
     def _onNodeChanged(self, caller, event) -> None:
         if self.session is None or self.volumeNode is None:
@@ -494,6 +472,8 @@ class VolSRLogic(ScriptedLoadableModuleLogic):
         except Exception as err:  # e.g. a non-linear transform: Slicer draws it
             logging.error(f"VolSR: {err}; switched off")
             self.disable()
+            if self.parameters is not None:
+                self.parameters.enabled = False
         self.render()
 
 
@@ -507,7 +487,7 @@ def _sameVtkObject(a, b) -> bool:
 # VolSRTest
 #
 class VolSRTest(ScriptedLoadableModuleTest):
-    """Self-test inside Slicer: VolSR draws a volume in the 3D view and gives it back."""
+    """Self-test inside Slicer: the parameter node, and VolSR drawing a volume in the 3D view and giving it back."""
 
     def setUp(self):
         slicer.mrmlScene.Clear()
@@ -516,14 +496,14 @@ class VolSRTest(ScriptedLoadableModuleTest):
         self.setUp()
         self.test_ras_to_lps()
         self.setUp()
+        self.test_parameter_node()
+        self.setUp()
         self.test_VolSR_draws_the_3D_view()
 
     # helpers -----------------------------------------------------------------------------------------
     def phantomVolumeNode(self, shape=(64, 64, 64)):
         """A scalar volume node holding VolSR's CT phantom, placed as our reader places it (LPS -> RAS)."""
-        import vtk
-
-        importVolsrCore()
+        bootstrap.importVolsrCore()
         from volsr_core.hosts.slicer import ijk_to_ras_of
         from volsr_core.io import make_phantom
         from volsr_core.scene import Volume
@@ -538,6 +518,10 @@ class VolSRTest(ScriptedLoadableModuleTest):
         node.SetIJKToRASMatrix(matrix)
         node.CreateDefaultDisplayNodes()
         return node
+
+    def privateParameterNode(self) -> VolSRParameterNode:
+        """A VolSR parameter node of its own: the module's panel, if shown, follows only the scene's."""
+        return VolSRParameterNode(slicer.mrmlScene.AddNewNodeByClass("vtkMRMLScriptedModuleNode", "VolSRTest"))
 
     def testModel(self):
         """The shipped S 4x model (None), else an untrained one exported here (needs PyTorch)."""
@@ -563,7 +547,7 @@ class VolSRTest(ScriptedLoadableModuleTest):
     # tests -------------------------------------------------------------------------------------------
     def test_ras_to_lps(self):
         self.delayDisplay("RAS -> LPS")
-        importVolsrCore()
+        bootstrap.importVolsrCore()
         import numpy as np
 
         from volsr_core.hosts.slicer import ras_to_lps, volume_from_ijk_to_ras
@@ -575,6 +559,27 @@ class VolSRTest(ScriptedLoadableModuleTest):
         self.assertTrue(np.allclose(volume.origin, (-40.0, -35.0, -20.0)))
         self.assertTrue(np.allclose(volume.spacing, (0.8, 0.9, 1.2)))
 
+    def test_parameter_node(self):
+        self.delayDisplay("The parameter node")
+        logic = VolSRLogic()
+        scenes = logic.getParameterNode()
+        self.assertIs(logic.getParameterNode().parameterNode, scenes.parameterNode, "one per scene")
+        self.assertEqual(scenes.parameterNode.GetAttribute("ModuleName"), "VolSR")
+
+        parameters = self.privateParameterNode()
+        self.assertIsNone(parameters.inputVolume)
+        self.assertEqual((parameters.preset, parameters.scale, parameters.variant, parameters.device,
+                          parameters.modelPath, parameters.enabled), (KEEP_PRESET, 4, "S", "cpu", "", False))
+        parameters.scale = 8
+        self.assertEqual(parameters.parameterNode.GetParameter("scale"), "8")  # in the node: saved with the scene
+        with self.assertRaises(ValueError):
+            parameters.scale = 3
+        self.assertIsNone(logic.apply(parameters))  # off: nothing to do
+        parameters.enabled = True
+        with self.assertRaisesRegex(ValueError, "input volume"):
+            logic.apply(parameters)
+        self.assertFalse(parameters.enabled, "apply() unticks what it could not switch on")
+
     def test_VolSR_draws_the_3D_view(self):
         self.delayDisplay("VolSR in the 3D view")
         logic = VolSRLogic()
@@ -585,7 +590,13 @@ class VolSRTest(ScriptedLoadableModuleTest):
         model = self.testModel()
         slicer.app.layoutManager().setLayout(slicer.vtkMRMLLayoutNode.SlicerLayoutOneUp3DView)
         slicer.app.processEvents()
-        session = logic.enable(node, scale=4, variant="S", model=model, preset="CT-Phantom")
+        parameters = self.privateParameterNode()
+        parameters.inputVolume = node
+        parameters.preset = "CT-Phantom"
+        parameters.modelPath = model or ""
+        parameters.enabled = True  # scale 4, variant S: the defaults
+        session = logic.apply(parameters)
+        self.assertIs(logic.apply(parameters), session, "unchanged settings: no restart")
         view = logic.threeDView()
         session.renderer.ResetCamera()
         for _ in range(2):  # two frames: the second one uses the first as history
@@ -600,7 +611,8 @@ class VolSRTest(ScriptedLoadableModuleTest):
         self.delayDisplay(f"VolSR on: {logic.statusText()}")
 
         vtkVolume, overlay = session.vtk_volume, session.adapter.overlay
-        logic.disable()
+        parameters.enabled = False
+        self.assertIsNone(logic.apply(parameters))
         view.forceRender()
         self.assertFalse(view.renderWindow().GetRenderers().IsItemPresent(overlay))
         self.assertEqual(vtkVolume.GetVisibility(), 1)

@@ -1,7 +1,8 @@
 """The 3D Slicer extension (CMakeLists.txt, VolSRModule/) and its Slicer-free core (volsr_core.hosts.slicer).
 
 Slicer itself is not here: the module's files are checked against Slicer's templates, VolSR.py is
-compiled and imported as plain Python, and the core runs through the real VTK adapter in an
+compiled and imported as plain Python (its parameter node, its logic's way of following it and its
+VolSRLib.bootstrap helper run without Slicer), and the core runs through the real VTK adapter in an
 offscreen (EGL) VTK window holding a scene in RAS terms, as Slicer's 3D view holds it.
 """
 from __future__ import annotations
@@ -13,8 +14,10 @@ import py_compile
 import re
 import subprocess
 import sys
+import typing
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -25,6 +28,8 @@ from volsr_core.scene import Camera, Volume
 REPO = Path(__file__).resolve().parents[1]
 MODULE = REPO / "VolSRModule"
 VOLSR_PY = MODULE / "VolSR.py"
+BOOTSTRAP_PY = MODULE / "VolSRLib" / "bootstrap.py"
+UI = MODULE / "Resources" / "UI" / "VolSR.ui"
 W, H = 128, 96
 
 
@@ -56,8 +61,11 @@ def test_the_module_cmakelists_builds_a_scripted_module_with_its_resources_and_t
     files = [s.replace("${MODULE_NAME}", "VolSR") for s in scripts + resources]
     assert "VolSR.py" in files and "Resources/UI/VolSR.ui" in files and "Resources/Icons/VolSR.png" in files
     assert "Resources/requirements.txt" in files
+    assert "VolSRLib/__init__.py" in files and "VolSRLib/bootstrap.py" in files, "the helper package is installed"
     for name in files:
         assert (MODULE / name).is_file(), f"{name} is listed but missing"
+    python = {str(f.relative_to(MODULE)) for f in MODULE.rglob("*.py") if "Testing" not in f.parts}
+    assert python <= set(files), f"Python files Slicer would not install: {sorted(python - set(files))}"
     macro = re.search(r"slicerMacroBuildScriptedModule\(([^)]*)\)", text).group(1)
     for part in ("NAME ${MODULE_NAME}", "SCRIPTS ${MODULE_PYTHON_SCRIPTS}", "RESOURCES ${MODULE_PYTHON_RESOURCES}",
                  "WITH_GENERIC_TESTS"):
@@ -68,12 +76,25 @@ def test_the_module_cmakelists_builds_a_scripted_module_with_its_resources_and_t
     assert (MODULE / "Testing" / "Python" / "CMakeLists.txt").is_file()
 
 
+def ui_bindings() -> dict[str, tuple[str, str]]:
+    """VolSR.ui's widgets bound to a parameter (dynamic property SlicerParameterName): parameter -> (name, class)."""
+    bound = {}
+    for widget in ET.parse(UI).getroot().iter("widget"):
+        prop = widget.find("property[@name='SlicerParameterName']")
+        if prop is not None:
+            assert prop.get("stdset") == "0", "SlicerParameterName is a dynamic property (stdset=0)"
+            bound[prop.findtext("string")] = (widget.get("name"), widget.get("class"))
+    return bound
+
+
 def widget_names_used_by_the_module() -> set[str]:
-    return set(re.findall(r"self\.ui\.(\w+)", VOLSR_PY.read_text(encoding="utf-8")))
+    """Widgets VolSR.py names, and those bound to its parameter node (connectGui)."""
+    named = set(re.findall(r"self\.ui\.(\w+)", VOLSR_PY.read_text(encoding="utf-8")))
+    return named | {name for name, _ in ui_bindings().values()}
 
 
 def test_the_ui_file_is_designer_xml_with_every_widget_the_module_uses():
-    root = ET.parse(MODULE / "Resources" / "UI" / "VolSR.ui").getroot()
+    root = ET.parse(UI).getroot()
     assert root.tag == "ui" and root.findtext("class") == "VolSR"
     top = root.find("widget")
     assert top.get("class") == "qMRMLWidget" and top.get("name") == "VolSR"
@@ -115,26 +136,35 @@ def install_requires() -> list[str]:
     raise AssertionError("setup.py has no install_requires")
 
 
-def load_volsr_py():
-    """VolSR.py imported as plain Python (outside Slicer its Slicer classes get stand-in bases)."""
+@pytest.fixture
+def volsr(monkeypatch):
+    """VolSR.py imported as plain Python (outside Slicer its Slicer classes get stand-in bases), its folder
+    on sys.path as Slicer puts it there (for VolSRLib)."""
     import importlib.util
 
+    monkeypatch.syspath_prepend(str(MODULE))
     spec = importlib.util.spec_from_file_location("VolSR_outside_slicer", VOLSR_PY)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
-def test_requirements_txt_lists_the_core_dependencies_but_not_slicers_own():
-    volsr = load_volsr_py()
-    specs = volsr.requirementLines()
-    names = {volsr.requirementName(s) for s in specs}
+def test_requirements_txt_lists_the_core_dependencies_but_not_slicers_own(volsr):
+    boot = volsr.bootstrap
+    specs = boot.requirementLines()
+    names = {boot.requirementName(s) for s in specs}
     slicer_brings = {"vtk", "simpleitk", "numpy"}
     assert not names & (slicer_brings | {"torch"}), f"must not be installed into Slicer: {names & slicer_brings}"
-    wanted = {volsr.requirementName(s) for s in install_requires()} - slicer_brings
+    wanted = {boot.requirementName(s) for s in install_requires()} - slicer_brings
     assert wanted <= names, f"setup.py needs, requirements.txt lacks: {sorted(wanted - names)}"
     assert {"onnxruntime", "numba", "pydicom", "h5py"} <= names
-    assert volsr.requirementName("PyYAML>=6.0") == "pyyaml" and volsr.requirementName("numba-cuda>=0.2") == "numba-cuda"
+    assert boot.requirementName("PyYAML>=6.0") == "pyyaml" and boot.requirementName("numba-cuda>=0.2") == "numba-cuda"
+
+
+def top_level_imports(tree: ast.Module) -> set[str]:
+    """The packages a module imports in statements directly in its body (not inside functions, try or if)."""
+    names = {a.name.split(".")[0] for n in tree.body if isinstance(n, ast.Import) for a in n.names}
+    return names | {n.module.split(".")[0] for n in tree.body if isinstance(n, ast.ImportFrom) and n.module}
 
 
 def test_volsr_py_compiles_and_defines_the_four_template_classes(tmp_path):
@@ -153,13 +183,56 @@ def test_volsr_py_compiles_and_defines_the_four_template_classes(tmp_path):
     assert {"enable", "disable", "ensureDependencies", "volumeFromNode", "frameTimeMs"} <= methods("VolSRLogic")
     assert {"setUp", "runTest"} <= methods("VolSRTest")
     # qt and ctk only inside functions; slicer only inside the try that gives stand-ins outside Slicer
-    top_imports = {a.name.split(".")[0] for n in tree.body if isinstance(n, ast.Import) for a in n.names}
-    top_imports |= {n.module.split(".")[0] for n in tree.body if isinstance(n, ast.ImportFrom) and n.module}
-    assert not top_imports & {"qt", "ctk", "slicer", "vtk", "volsr_core"}
+    assert not top_level_imports(tree) & {"qt", "ctk", "slicer", "vtk", "volsr_core"}
+
+    # Slicer's template (5.2+): a parameter node wrapper; observers through VTKObservationMixin
+    decorators = [d.id for d in classes["VolSRParameterNode"].decorator_list if isinstance(d, ast.Name)]
+    assert decorators == ["parameterNodeWrapper"]
+    for name in ("VolSRWidget", "VolSRLogic"):
+        assert "VTKObservationMixin" in [b.id for b in classes[name].bases if isinstance(b, ast.Name)]
+    assert {"initializeParameterNode", "setParameterNode", "onParameterNodeModified", "onSceneStartClose",
+            "onSceneEndClose", "enter", "exit"} <= methods("VolSRWidget")
+    assert {"getParameterNode", "apply", "cleanup"} <= methods("VolSRLogic")
+    assert {"test_ras_to_lps", "test_parameter_node", "test_VolSR_draws_the_3D_view"} <= methods("VolSRTest")
+    # the parameter node wrapper reads the class's annotations as objects: no postponed (string) annotations
+    assert not any(isinstance(n, ast.ImportFrom) and n.module == "__future__" for n in tree.body)
+    # the pip bootstrap lives in VolSRLib/bootstrap.py, not at the top of VolSR.py
+    assert "bootstrap" in [a.name for n in tree.body if isinstance(n, ast.ImportFrom) and n.module == "VolSRLib"
+                           for a in n.names]
+    assert not {"requirementLines", "missingRequirements", "importVolsrCore"} & {
+        n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+
+
+def test_the_bootstrap_helper_compiles_and_needs_slicer_only_to_install(tmp_path):
+    py_compile.compile(str(BOOTSTRAP_PY), cfile=str(tmp_path / "bootstrap.pyc"), doraise=True)
+    tree = ast.parse(BOOTSTRAP_PY.read_text(encoding="utf-8"))
+    assert not top_level_imports(tree) & {"qt", "ctk", "slicer", "vtk", "volsr_core"}
+    functions = {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
+    assert {"requirementLines", "requirementName", "missingRequirements", "sourceCheckout", "importVolsrCore",
+            "ensureDependencies"} <= set(functions)
+    uses_slicer = {name for name, f in functions.items()
+                   for n in ast.walk(f) if isinstance(n, ast.Import) and any(a.name == "slicer" for a in n.names)}
+    assert uses_slicer == {"ensureDependencies"}
+
+
+def test_the_bootstrap_helper_works_outside_slicer(volsr, tmp_path):
+    boot = volsr.bootstrap
+    assert boot.REQUIREMENTS == MODULE / "Resources" / "requirements.txt" and boot.MODULE_DIR == MODULE
+    requirements = tmp_path / "requirements.txt"
+    requirements.write_text("# comment\n\npytest>=7  # the test runner\nsurely-not-installed_pkg[extra]>=1\n")
+    specs = boot.requirementLines(requirements)
+    assert specs == ["pytest>=7", "surely-not-installed_pkg[extra]>=1"]
+    assert boot.missingRequirements(specs) == ["surely-not-installed_pkg[extra]>=1"]
+    assert boot.requirementName(specs[1]) == "surely-not-installed-pkg"
+    assert boot.sourceCheckout() == REPO and boot.sourceCheckout(tmp_path / "VolSRModule") is None
+    assert boot.importVolsrCore().__name__ == "volsr_core"
+    with pytest.raises(ImportError):  # installing needs Slicer's pip helpers
+        boot.ensureDependencies()
 
 
 def test_volsr_py_imports_outside_slicer_and_finds_volsr_core_in_its_checkout(tmp_path):
-    """Without an installed volsr, the module puts its checkout on sys.path (presets and models included)."""
+    """Without an installed volsr, the module's bootstrap puts its checkout on sys.path (presets and models
+    included)."""
     code = f"""
 import sys, importlib.util, json
 sys.meta_path = [f for f in sys.meta_path if 'Editable' not in getattr(f, '__name__', type(f).__name__)]
@@ -169,14 +242,15 @@ try:
     raise SystemExit('volsr_core is importable without the checkout: the test cannot show anything')
 except ImportError:
     pass
+sys.path.insert(0, {str(MODULE)!r})  # as Slicer puts the module's folder there
 spec = importlib.util.spec_from_file_location('VolSR', {str(VOLSR_PY)!r})
 VolSR = importlib.util.module_from_spec(spec); spec.loader.exec_module(VolSR)
 assert VolSR.slicer is None
-core = VolSR.importVolsrCore()
+core = VolSR.bootstrap.importVolsrCore()
 from volsr_core.scene.presets import get_preset
 from volsr_core.runtime.models import models_dir
 print(json.dumps({{"core": core.__file__, "preset": get_preset("CT-Bone").name, "models": str(models_dir()),
-                   "presets": VolSR.presetNames(), "checkout": str(VolSR.sourceCheckout())}}))
+                   "presets": list(VolSR.PRESETS), "checkout": str(VolSR.bootstrap.sourceCheckout())}}))
 """
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=60)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -184,6 +258,120 @@ print(json.dumps({{"core": core.__file__, "preset": get_preset("CT-Bone").name, 
     assert Path(out["core"]).resolve() == REPO / "volsr_core" / "__init__.py"
     assert Path(out["checkout"]) == REPO and Path(out["models"]).resolve() == REPO / "resources" / "models"
     assert out["preset"] == "CT-Bone" and "CT-AAA" in out["presets"]
+
+
+# the parameter node ---------------------------------------------------------------------------------------
+def test_the_parameter_node_declares_every_setting_the_ui_binds(volsr):
+    """Each widget with a SlicerParameterName binds to a declared setting of a type Slicer's connectors take
+    for that widget (QComboBox: Annotated[int | str, Choice]; QCheckBox: bool; qMRMLNodeComboBox: a node
+    class); the model path is bound by hand (ctkPathLineEdit binds only to pathlib.Path)."""
+    node_class = volsr.VolSRParameterNode
+    hints = typing.get_type_hints(node_class, include_extras=True)  # objects, without the module's globals
+    assert set(hints) == {"inputVolume", "preset", "scale", "variant", "device", "modelPath", "enabled"}
+    bound = ui_bindings()
+    assert set(bound) == set(hints) - {"modelPath"}, "every setting but the model path is bound in VolSR.ui"
+    root = ET.parse(UI).getroot()
+    for name, (widget, widget_class) in bound.items():
+        kind = hints[name]
+        if widget_class == "QComboBox":
+            assert typing.get_origin(kind) is typing.Annotated, f"{name}: a QComboBox needs Annotated[..., Choice]"
+            base, *extras = typing.get_args(kind)
+            choices = [e.choices for e in extras if isinstance(e, volsr.Choice)]
+            assert base in (int, str) and len(choices) == 1, f"{name}: {kind}"
+            assert getattr(node_class, name) in choices[0], f"{name}: the default is one of the choices"
+            assert all(isinstance(c, base) for c in choices[0])
+            items = [i.findtext("property/string") for i in root.find(f".//widget[@name='{widget}']").findall("item")]
+            assert not items or items == [str(c) for c in choices[0]], f"{widget}: its items are the choices"
+        elif widget_class == "QCheckBox":
+            assert kind is bool
+        else:
+            assert widget_class == "qMRMLNodeComboBox" and kind is volsr.vtkMRMLScalarVolumeNode
+            types = [t.text for t in root.find(f".//widget[@name='{widget}']/property[@name='nodeTypes']").iter("string")]
+            assert types == [kind.__name__]
+    assert hints["modelPath"] is str
+    assert re.search(r'self\.ui\.modelPathLineEdit\.connect\("currentPathChanged\(QString\)", self\.onModelPathChanged\)',
+                     VOLSR_PY.read_text(encoding="utf-8"))
+    defaults = {name: getattr(node_class, name, None) for name in hints}
+    assert defaults == {"inputVolume": None, "preset": volsr.KEEP_PRESET, "scale": 4, "variant": "S", "device": "cpu",
+                        "modelPath": "", "enabled": False}
+    preset_choices = typing.get_args(hints["preset"])[1].choices
+    assert tuple(preset_choices) == (volsr.KEEP_PRESET, *volsr.PRESETS)
+
+
+def test_the_module_settings_are_volsr_cores(volsr):
+    """PRESETS, SCALES, VARIANTS and DEVICES are spelled out in VolSR.py (needed before volsr_core can be
+    imported): they must stay volsr_core's."""
+    from volsr_core.hosts.slicer import SCALES, VARIANTS, preset_names
+    from volsr_core.render.raycaster import DEVICES
+
+    assert list(volsr.PRESETS) == preset_names()
+    assert volsr.SCALES == SCALES and volsr.VARIANTS == VARIANTS and volsr.DEVICES == DEVICES
+
+
+def test_the_logic_follows_the_parameter_node(volsr):
+    """VolSRLogic.apply: the preset is written once per (volume, preset); VolSR starts, restarts on a changed
+    setting and stops as the parameter node says; what it could not switch on is unticked. Slicer's part
+    (enable, disable, applyPreset) is replaced by recorders."""
+    logic = volsr.VolSRLogic()
+    calls = []
+
+    def enable(**settings):
+        calls.append(("enable", settings))
+        if settings["variant"] == "L":
+            raise RuntimeError("no L model")
+        logic.session = SimpleNamespace(enabled=True)
+        return logic.session
+
+    def disable():
+        if logic.session is not None:
+            calls.append(("disable",))
+        logic.session = None
+
+    logic.enable, logic.disable = enable, disable
+    logic.applyPreset = lambda node, name: calls.append(("preset", node, name))
+    volume = object()
+    parameters = volsr.VolSRParameterNode()  # outside Slicer a plain object holding the defaults
+    parameters.inputVolume = None
+
+    def applied():
+        result = logic.apply(parameters)
+        assert logic.parameters is parameters and result is logic.session
+        done = list(calls)
+        calls.clear()
+        return done
+
+    assert applied() == []
+    parameters.inputVolume, parameters.preset = volume, "CT-AAA"
+    assert applied() == [("preset", volume, "CT-AAA")]
+    assert applied() == [], "written once"
+    parameters.enabled = True
+    shipped = {"volumeNode": volume, "scale": 4, "variant": "S", "model": None, "device": "cpu"}
+    assert applied() == [("enable", shipped)] and logic.enabled
+    assert applied() == [], "unchanged: no restart"
+    parameters.scale, parameters.modelPath = 8, " /models/s8.onnx "
+    assert applied() == [("disable",), ("enable", {**shipped, "scale": 8, "model": "/models/s8.onnx"})]
+    parameters.preset = volsr.KEEP_PRESET
+    assert applied() == []
+    parameters.preset = "CT-AAA"
+    assert applied() == [("preset", volume, "CT-AAA")], "chosen again: written again"
+    logic.disable()  # e.g. switched off from the Python console
+    calls.clear()
+    assert applied() == [("enable", {**shipped, "scale": 8, "model": "/models/s8.onnx"})], "started again"
+
+    parameters.variant = "L"
+    with pytest.raises(RuntimeError, match="no L model"):
+        logic.apply(parameters)
+    assert parameters.enabled is False and not logic.enabled, "what could not start is unticked"
+    calls.clear()
+    assert applied() == []
+    parameters.enabled, parameters.inputVolume = True, None
+    with pytest.raises(ValueError, match="input volume"):
+        logic.apply(parameters)
+    assert parameters.enabled is False and calls == []
+    parameters.inputVolume = volume
+    assert applied() == [("preset", volume, "CT-AAA")], "a volume chosen again gets the preset"
+    logic.cleanup()
+    assert logic.parameters is None
 
 
 # RAS <-> LPS ------------------------------------------------------------------------------------------
