@@ -206,6 +206,20 @@ BAD_CONFIGS = [
     ("{preset: CT-Phantom}", "{preset: CT-Phantom, name: x}", "transfer_function.name: only applies with 'file'"),
     ("{preset: CT-Phantom}", "{file: none.json}", "volumes[0].transfer_function.file: "),
     ("{preset: CT-Phantom}", "{}", "volumes[0].transfer_function: needs exactly one of 'preset' or 'file'"),
+    ("camera: {pool_size: 8,", "camera: {pool_sise: 8,",
+     ("camera.pool_sise: unknown key (allowed: pool_size, view_angle, distance_range, max_roll, focal_jitter, "
+      "max_orbit_speed, max_elevation_speed, zoom_range, max_elevation, max_zoom_speed, period)")),
+    ("spp: 4", "spp: 4, samples: 2", "ground_truth.samples: unknown key (allowed: mode, spp)"),
+    ("videos: 3\n  - name: headsq", "videos: 3\n    colour: red\n  - name: headsq",
+     "volumes[0].colour: unknown key (allowed: name, path, phantom_shape, transfer_function, videos, split)"),
+    ("{preset: CT-Phantom}", "{preset: CT-Phantom, window: 2}",
+     "volumes[0].transfer_function.window: unknown key (allowed: preset, file, name, range)"),
+    ("videos: 3\n  - name: headsq", "videos: three\n  - name: headsq", "volumes[0].videos: expected an integer"),
+    ("pool_size: 8", "pool_size: 8, view_angle: wide", "camera.view_angle: expected a number, got str 'wide'"),
+    ("pool_size: 8", "pool_size: 8, view_angle: 0.5", "camera.view_angle: must lie in [1.0, 179.0], got 0.5"),
+    ("scales: [2, 4]", "scales: 4", "scales: expected a list, got int 4"),
+    ("videos: 3\n  - name: headsq", "videos: 3\n    split: holdout\n  - name: headsq",
+     "volumes[0].split: must be one of train, val, test, got 'holdout'"),
 ]
 
 
@@ -237,6 +251,25 @@ def test_empty_config(tmp_path):
     empty.write_text("")
     with pytest.raises(InputError, match=r"empty.yaml: \(top level\): expected a mapping, got nothing"):
         read_config(empty)
+
+
+def test_defaults_fill_what_the_config_leaves_out(config_file):
+    config = read_config(config_file)
+    assert config.pool == {"pool_size": 8, "view_angle": 30.0, "distance_range": [0.9, 1.6], "max_roll": 20.0,
+                           "focal_jitter": 0.05}
+    assert config.path == {"max_orbit_speed": 6.0, "max_elevation_speed": 1.5, "zoom_range": [0.8, 1.5],
+                           "max_elevation": 60.0, "max_zoom_speed": 0.01, "period": 30}
+    assert config.volumes[0].phantom_shape == (48, 48, 48) and config.volumes[1].phantom_shape is None
+    assert [v.split for v in config.volumes] == [None, None]
+    bare = config_file.parent / "bare.yaml"
+    bare.write_text(config_file.read_text().replace("ground_truth: {mode: supersampled, spp: 4}\n", "")
+                    .replace("    phantom_shape: [48, 48, 48]\n", ""))
+    try:
+        defaults = read_config(bare)
+    finally:
+        bare.unlink()
+    assert defaults.ground_truth == {"mode": "supersampled", "spp": 16}
+    assert defaults.volumes[0].phantom_shape == (128, 128, 128)
 
 
 def test_transfer_function_from_a_file(shared_data, tmp_path, config_file):

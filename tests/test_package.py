@@ -8,7 +8,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "volsr_core"
 LAYERS = ["io", "scene", "render", "temporal", "dataset", "sr", "runtime", "hosts", "apps", "cli"]
-SHARED = {"errors", "atomic", "hashing", "images", "_vtk"}  # plain helpers every layer may use
+SHARED = {"errors", "atomic", "hashing", "images", "_vtk", "config_reader"}  # plain helpers every layer may use
 
 
 def layer_of(module: str) -> str | None:

@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 import itertools
+import json
 
 import pytest
 
 torch = pytest.importorskip("torch")
 
+from volsr_core.errors import InputError  # noqa: E402
+from volsr_core.sr.checkpoint import load_model, save_checkpoint  # noqa: E402
 from volsr_core.sr.network import (  # noqa: E402
     FEATURE_CHANNELS, NetworkConfig, Reweighting, SuperResolutionNet, backward_warp, upsample_motion, variant_config,
     zero_upsample,
@@ -189,3 +192,47 @@ def test_the_temporal_loss_is_zero_when_the_output_changes_as_the_ground_truth_d
     assert same < 1e-5, "a constant error does not flicker"
     flicker = temporal_charbonnier(gt + offset, gt_prev, gt, gt_prev, motion, eps=1e-6)
     assert flicker > 0.1
+
+
+def test_a_network_config_reads_back_from_its_dict_and_refuses_unknown_keys():
+    config = NetworkConfig(scale=8, previous_frames=1, features=("color", "depth"), fold=4, widths=(8, 12))
+    assert NetworkConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config
+    assert NetworkConfig.from_dict({"scale": 2, "fold": 2}) == NetworkConfig(scale=2, fold=2)  # defaults filled
+    with pytest.raises(InputError, match=r"^m.pt: network.colour: unknown key \(allowed: scale, previous_frames, "
+                                         r"features, fold, widths, reweight_width, feature_width, recurrent, "
+                                         r"taau_base\)$"):
+        NetworkConfig.from_dict({**config.to_dict(), "colour": True}, source="m.pt", key="network")
+    with pytest.raises(InputError, match=r"^m.pt: network.widths\[0\]: expected an integer, got str '8'$"):
+        NetworkConfig.from_dict({"widths": ["8"]}, source="m.pt", key="network")
+    with pytest.raises(InputError, match=r"^m.pt: network: scale must be one of \(2, 4, 8, 16\), got 3$"):
+        NetworkConfig.from_dict({"scale": 3}, source="m.pt", key="network")
+
+
+def test_a_weights_file_with_an_unknown_network_key_is_a_one_line_error(tmp_path):
+    net = SuperResolutionNet(NetworkConfig(scale=4, previous_frames=0, recurrent=True, widths=(8, 12)))
+    save_checkpoint(tmp_path / "m.pt", net)
+    assert load_model(tmp_path / "m.pt").config == net.config
+    payload = torch.load(tmp_path / "m.pt", weights_only=True)
+    payload["network"]["colour"] = True
+    torch.save(payload, tmp_path / "m.pt")
+    with pytest.raises(InputError, match=r"m.pt: network.colour: unknown key \(allowed: scale, previous_frames,"):
+        load_model(tmp_path / "m.pt")
+
+
+def test_onnx_metadata_with_an_unknown_key_is_a_one_line_error(tmp_path):
+    pytest.importorskip("onnxruntime")
+    onnx = pytest.importorskip("onnx")
+    from volsr_core.runtime.engines import METADATA_KEY, OnnxEngine
+    from volsr_core.runtime.export import export_onnx
+
+    net = SuperResolutionNet(NetworkConfig(scale=4, previous_frames=0, recurrent=True, widths=(8, 12)))
+    path = export_onnx(net, tmp_path / "m.onnx", example_size=(4, 4))
+    assert OnnxEngine(path, providers=["CPUExecutionProvider"]).config == net.config
+    graph = onnx.load(path)
+    (entry,) = [e for e in graph.metadata_props if e.key == METADATA_KEY]
+    entry.value = json.dumps({**net.config.to_dict(), "colour": True})
+    onnx.save(graph, path)
+    with pytest.raises(InputError) as caught:
+        OnnxEngine(path, providers=["CPUExecutionProvider"])
+    assert str(caught.value) == (f"{path}: volsr.network.colour: unknown key (allowed: scale, previous_frames, "
+                                 "features, fold, widths, reweight_width, feature_width, recurrent, taau_base)")

@@ -19,7 +19,7 @@ torch = pytest.importorskip("torch")
 
 from volsr_core.errors import InputError  # noqa: E402
 from volsr_core.sr.checkpoint import load_checkpoint  # noqa: E402
-from volsr_core.sr.config import load_training_config  # noqa: E402
+from volsr_core.sr.config import LossSection, TrainingConfig, load_training_config  # noqa: E402
 from volsr_core.sr.training import Trainer  # noqa: E402
 
 def write_config(folder: Path, dataset: Path, recurrent: bool = False, **train) -> Path:
@@ -44,10 +44,8 @@ def losses(run: Path) -> list[float]:
 
 def test_a_tiny_model_overfits_a_tiny_sequence(tiny_sequences, tmp_path):
     path = write_config(tmp_path, tiny_sequences, steps=150, checkpoint_every=150, validate_every=150)
-    config = load_training_config(path)
-    config["data"]["augment"] = False
-    config["model"]["widths"] = [16, 24]
-    config["optim"].update(weight_decay=0.0, warmup_steps=1, min_lr_ratio=1.0)
+    config = load_training_config(path).updated({"data": {"augment": False}, "model": {"widths": [16, 24]},
+                                                 "optim": {"weight_decay": 0.0, "warmup_steps": 1, "min_lr_ratio": 1.0}})
     Trainer(config, progress=False).run()
     loss = losses(tmp_path / "run")
     first, last = sum(loss[:5]) / 5, sum(loss[-5:]) / 5
@@ -61,7 +59,9 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(tiny_sequences, tmp_pa
     Trainer(straight, progress=False).run()
     interrupted = load_training_config(write_config(tmp_path / "b", tiny_sequences, recurrent))
     Trainer(interrupted, progress=False).run(until=4)
-    assert load_checkpoint(tmp_path / "b" / "run" / "checkpoints" / "last.pt", trusted=True)["step"] == 4
+    state = load_checkpoint(tmp_path / "b" / "run" / "checkpoints" / "last.pt", trusted=True)
+    assert state["step"] == 4
+    assert isinstance(state["config"], dict) and TrainingConfig.from_dict(state["config"]) == interrupted
     Trainer(interrupted, progress=False).run()  # a new process would do the same: resumes from last.pt
     a = load_checkpoint(tmp_path / "a" / "run" / "checkpoints" / "last.pt", trusted=True)["model"]
     b = load_checkpoint(tmp_path / "b" / "run" / "checkpoints" / "last.pt", trusted=True)["model"]
@@ -84,10 +84,8 @@ def test_torchrun_two_cpu_processes(tiny_sequences, tmp_path):
 
 def test_a_taau_based_network_trains_unrolled_with_the_temporal_loss(tiny_sequences, tmp_path):
     path = write_config(tmp_path, tiny_sequences, steps=6, unroll=2, validate_every=6)
-    config = load_training_config(path)
-    config["data"]["previous_frames"] = 0
-    config["model"]["taau_base"] = True
-    config["loss"]["temporal_weight"] = 0.5
+    config = load_training_config(path).updated({"data": {"previous_frames": 0}, "model": {"taau_base": True},
+                                                 "loss": {"temporal_weight": 0.5}})
     result = Trainer(config, progress=False).run()
     assert result["step"] == 6 and torch.isfinite(torch.tensor(losses(tmp_path / "run"))).all()
     assert result["best_psnr"] > 10
@@ -98,13 +96,63 @@ def test_model_init_starts_fine_tuning_from_given_weights(tiny_sequences, tmp_pa
     Trainer(first, progress=False).run()
     start = tmp_path / "a" / "run" / "checkpoints" / "last.pt"
     tuned = load_training_config(write_config(tmp_path / "b", tiny_sequences, steps=4))
-    tuned["model"]["init"] = str(start)
+    tuned = tuned.updated({"model": {"init": str(start)}})
     trainer = Trainer(tuned, progress=False)
     expected = load_checkpoint(start, trusted=True)["model"]
     for name, value in trainer.model.state_dict().items():
         assert torch.equal(value, expected[name]), name
     other = load_training_config(write_config(tmp_path / "c", tiny_sequences, steps=4))
-    other["model"]["widths"] = [8, 16]
-    other["model"]["init"] = str(start)
+    other = other.updated({"model": {"widths": [8, 16], "init": str(start)}})
     with pytest.raises(InputError, match="different network"):
         Trainer(other, progress=False)
+
+
+def test_defaults_fill_what_the_file_leaves_out_and_paths_resolve_against_its_folder(tmp_path):
+    path = tmp_path / "configs" / "train.yaml"
+    path.parent.mkdir()
+    path.write_text("data: {root: ../data}\ntrain: {steps: 5}\nloss:\n")
+    config = load_training_config(path)
+    assert config.data.root == str((tmp_path / "data").resolve())
+    assert config.out == str((path.parent / "runs" / "default").resolve())
+    assert config.train.steps == 5 and config.train.batch_size == 8 and config.train.validate_every is None
+    assert config.data.features == ("color", "depth", "max_rgba") and config.data.crop == 96
+    assert config.model.variant == "S" and config.model.init is None and config.optim.lr == 1e-3
+    assert config.loss == LossSection() and config.seed == 0
+
+
+@pytest.mark.parametrize("text, message", [
+    ("data: {root: x}\nsede: 1", "sede: unknown key (allowed: seed, out, data, model, optim, train, loss)"),
+    ("data: {root: x, rot: y}", "data.rot: unknown key (allowed: root, scale, previous_frames, crop, features,"),
+    ("data: {root: x}\nmodel: {varient: M}", "model.varient: unknown key (allowed: variant, fold, widths,"),
+    ("data: {root: x}\noptim: {learning_rate: 1}", "optim.learning_rate: unknown key (allowed: lr, weight_decay,"),
+    ("data: {root: x}\ntrain: {stepz: 10}", "train.stepz: unknown key (allowed: steps, batch_size, unroll,"),
+    ("data: {root: x}\nloss: {l1: 1}", "loss.l1: unknown key (allowed: charbonnier_eps, ssim_weight,"),
+    ("data: {root: x}\ntrain: {steps: '10'}", "train.steps: expected an integer, got str '10'"),
+    ("data: {root: x}\ntrain: {batch_size: 0}", "train.batch_size: must be at least 1, got 0"),
+    ("data: {root: x}\ntrain: {amp: 1}", "train.amp: expected true or false, got int 1"),
+    ("data: {root: x, features: color}", "data.features: expected a list, got str 'color'"),
+    ("data: {root: x}\noptim: {lr: fast}", "optim.lr: expected a number, got str 'fast'"),
+    ("data: {root: x}\nmodel: {widths: [8, 12.5]}", "model.widths[1]: expected an integer, got float 12.5"),
+    ("data: {root: x}\nloss: [1]", "loss: expected a mapping, got list [1]"),
+    ("seed: 1", "data.root: missing (the dataset folder made by `volsr dataset`)"),
+    ("", "(top level): expected a mapping, got nothing"),
+    ("data: {root: x", "not valid YAML at line 1"),
+])
+def test_a_bad_training_config_is_a_one_line_error_naming_the_key(tmp_path, text, message):
+    path = tmp_path / "train.yaml"
+    path.write_text(text)
+    with pytest.raises(InputError) as caught:
+        load_training_config(path)
+    assert str(caught.value).startswith(f"{path}: ") and "\n" not in str(caught.value)
+    assert message in str(caught.value)
+
+
+def test_changes_to_a_config_are_checked_as_the_file_is(tmp_path):
+    path = tmp_path / "train.yaml"
+    path.write_text("data: {root: x}")
+    config = load_training_config(path)
+    assert config.updated({"train": {"steps": 3}}).train.steps == 3
+    with pytest.raises(InputError, match=r"config changes: train\.stepz: unknown key \(allowed: steps,"):
+        config.updated({"train": {"stepz": 3}})
+    with pytest.raises(InputError, match="config changes: data.scale: expected an integer"):
+        config.updated({"data": {"scale": "4"}})

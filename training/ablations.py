@@ -13,7 +13,6 @@ the same frames.
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 from pathlib import Path
 
@@ -44,10 +43,9 @@ def run_one(name: str, data: Path, scale: int, previous: int, features: list[str
     from volsr_core.sr.training import Trainer
 
     out = REPO / "runs" / "ablations" / name
-    config = copy.deepcopy(load_training_config(REPO / "training" / "configs" / "ablation_base.yaml"))
-    config["out"], config["data"]["root"] = str(out), str(data)
-    config["data"].update(scale=scale, previous_frames=previous, features=features)
-    config["train"]["steps"] = steps
+    config = load_training_config(REPO / "training" / "configs" / "ablation_base.yaml").updated(
+        {"out": str(out), "data": {"root": str(data), "scale": scale, "previous_frames": previous, "features": features},
+         "train": {"steps": steps}})
     report = out / "eval" / "eval.json"
     if report.exists() and json.loads(report.read_text()).get("steps") == steps:
         return json.loads(report.read_text())

@@ -126,7 +126,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     if trainer.rank == 0:
         best = (f"best validation PSNR {result['best_psnr']:.2f} dB (best.pt)" if result["best_psnr"] > float("-inf")
                 else "no validation frames, so no best.pt")
-        print(f"trained to step {result['step']}; {best}; checkpoints and log.csv in {config['out']}")
+        print(f"trained to step {result['step']}; {best}; checkpoints and log.csv in {config.out}")
     return 0
 
 

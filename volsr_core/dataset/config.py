@@ -2,7 +2,9 @@
 
 A config names the image sizes, the scales, the frames per video, the ground truth, the camera
 motion and the volumes with their transfer functions and video counts. :func:`read_config`
-checks every key and raises a one-line :class:`InputError` ``"<config>: <key>: <problem>"``.
+reads the file into the sections below (:mod:`volsr_core.config_reader`), checks what they
+cannot say (paths, scales, ranges, names) and raises a one-line :class:`InputError`
+``"<config>: <key>: <problem>"``.
 Volume and transfer-function paths are relative to the config file's folder; ``phantom`` names
 VolSR's synthetic CT (``phantom_shape`` (z, y, x) voxels, default 128^3).
 """
@@ -12,29 +14,22 @@ import hashlib
 import json
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Literal, get_args
 
-import yaml
-
-from volsr_core.errors import InputError, read_text_file
+from volsr_core.config_reader import fail, read_dataclass, read_value, read_yaml, setting
+from volsr_core.errors import InputError
 from volsr_core.scene.presets import get_preset, load_transfer_function
 
 SCALES = (2, 4, 8, 16)
-GROUND_TRUTH_MODES = ("supersampled", "taa")
+GroundTruthMode = Literal["supersampled", "taa"]
 PHANTOM = "phantom"
 PHANTOM_SHAPE = (128, 128, 128)
-TOP_KEYS = ("seed", "hr_size", "scales", "frames_per_video", "previous_frames", "ground_truth", "camera", "volumes")
-VOLUME_KEYS = ("name", "path", "phantom_shape", "transfer_function", "videos", "split")
-SPLITS = ("train", "val", "test")
+Split = Literal["train", "val", "test"]
+SPLITS: tuple[str, ...] = get_args(Split)
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-
-# camera keys: candidate_pool's (pool_size is its n) and smooth_random_path's, with their defaults
-POOL_DEFAULTS: dict[str, Any] = {"pool_size": 64, "view_angle": 30.0, "distance_range": [0.9, 1.6],
-                                 "max_roll": 20.0, "focal_jitter": 0.05}
-PATH_DEFAULTS: dict[str, Any] = {"max_orbit_speed": 3.0, "max_elevation_speed": 1.5, "zoom_range": [0.8, 1.5],
-                                 "max_elevation": 60.0, "max_zoom_speed": 0.01, "period": 30}
+POOL_KEYS = ("pool_size", "view_angle", "distance_range", "max_roll", "focal_jitter")  # the rest: the path's
 
 
 @dataclass(frozen=True)
@@ -101,208 +96,185 @@ class DatasetConfig:
         return "sha256:" + hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
 
 
-class _Checker:
-    """Raises one-line InputErrors naming the config file and the key."""
+# -- the file's sections, as written (read_config turns them into a DatasetConfig) ----------------
+@dataclass(frozen=True, kw_only=True)
+class _GroundTruth:
+    """How the HR frames are made: supersampled at ``spp`` rays per pixel, or TAA."""
 
-    def __init__(self, file: Path):
-        self.file = file
-
-    def fail(self, key: str, problem: str) -> None:
-        raise InputError(self.file, f"{key}: {problem}")
-
-    def mapping(self, value: Any, key: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> dict:
-        if not isinstance(value, Mapping):
-            self.fail(key or "(top level)", f"expected a mapping, got {_kind(value)}")
-        unknown = [k for k in value if k not in allowed]
-        if unknown:
-            self.fail(f"{key}.{unknown[0]}" if key else str(unknown[0]), f"unknown key (allowed: {', '.join(allowed)})")
-        missing = [k for k in required if k not in value]
-        if missing:
-            self.fail(f"{key}.{missing[0]}" if key else missing[0], "missing")
-        return dict(value)
-
-    def integer(self, value: Any, key: str, low: int | None = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            self.fail(key, f"expected an integer, got {_kind(value)}")
-        if low is not None and value < low:
-            self.fail(key, f"must be at least {low}, got {value}")
-        return int(value)
-
-    def number(self, value: Any, key: str, low: float | None = None, high: float | None = None) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(key, f"expected a number, got {_kind(value)}")
-        if (low is not None and value < low) or (high is not None and value > high):
-            self.fail(key, f"must lie in [{low}, {high}], got {value}")
-        return float(value)
-
-    def pair(self, value: Any, key: str, low: float | None = None) -> list[float]:
-        if not isinstance(value, list) or len(value) != 2:
-            self.fail(key, f"expected [low, high], got {value!r}")
-        lo, hi = (self.number(v, key, low) for v in value)
-        if not lo <= hi:
-            self.fail(key, f"needs low <= high, got {value!r}")
-        return [lo, hi]
-
-    def text(self, value: Any, key: str) -> str:
-        if not isinstance(value, str) or not value:
-            self.fail(key, f"expected a non-empty string, got {_kind(value)}")
-        return value
-
-    def existing(self, value: Any, key: str) -> tuple[str, Path]:
-        """A path as written and resolved against the config's folder; it must exist."""
-        written = self.text(value, key)
-        resolved = (self.file.parent / written).resolve()
-        if not resolved.exists():
-            self.fail(key, f"{resolved} does not exist")
-        return written, resolved
+    mode: GroundTruthMode = "supersampled"
+    spp: int = setting(16, low=1)
 
 
-def _kind(value: Any) -> str:
-    return "nothing" if value is None else f"{type(value).__name__} {value!r}"[:60]
+@dataclass(frozen=True, kw_only=True)
+class _Camera:
+    """candidate_pool's arguments (``pool_size`` is its ``n``), then smooth_random_path's."""
+
+    pool_size: int = setting(64, low=1)
+    view_angle: float = setting(30.0, low=1.0, high=179.0)
+    distance_range: tuple[float, float] = setting((0.9, 1.6), low=0.01, expected="[low, high]")
+    max_roll: float = setting(20.0, low=0.0, high=180.0)
+    focal_jitter: float = setting(0.05, low=0.0, high=1.0)
+    max_orbit_speed: float = setting(3.0, low=0.0, high=90.0)
+    max_elevation_speed: float = setting(1.5, low=0.0, high=90.0)
+    zoom_range: tuple[float, float] = setting((0.8, 1.5), low=0.01, expected="[low, high]")
+    max_elevation: float = setting(60.0, low=0.1, high=89.9)
+    max_zoom_speed: float = setting(0.01, low=0.0, high=1.0)
+    period: int = setting(30, low=1)
+
+
+@dataclass(frozen=True, kw_only=True)
+class _TransferFunctionEntry:
+    """``{preset, range?}`` or ``{file, name?, range?}``; ``range`` is None, ``"auto"`` or [lo, hi]."""
+
+    preset: str | None = None
+    file: str | None = None
+    name: str | None = None
+    range: Any = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class _VolumeEntry:
+    """One ``volumes`` entry as written (see :class:`VolumeSpec`)."""
+
+    name: str
+    path: str
+    phantom_shape: tuple[int, int, int] | None = setting(None, low=8, expected="[z, y, x] voxels")
+    transfer_function: _TransferFunctionEntry
+    videos: int = setting(low=1)
+    split: Split | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Document:
+    """The whole file as written."""
+
+    seed: int = setting(low=0)
+    hr_size: Any  # an integer or [width, height]
+    scales: tuple[int, ...]
+    frames_per_video: int = setting(low=1)
+    previous_frames: int = setting(low=0)
+    ground_truth: _GroundTruth
+    camera: _Camera
+    volumes: tuple[_VolumeEntry, ...]
 
 
 def read_config(path: str | os.PathLike) -> DatasetConfig:
     """Read and check a dataset config (YAML); InputError ``"<path>: <key>: <problem>"`` otherwise."""
     file = Path(path)
-    text = read_text_file(file)
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise InputError(file, f"not valid YAML{where}: {getattr(err, 'problem', None) or err}") from None
-    check = _Checker(file)
-    doc = check.mapping(doc, "", TOP_KEYS, required=TOP_KEYS[:-3] + ("volumes",))
-    scales = _scales(check, doc["scales"])
-    frames = check.integer(doc["frames_per_video"], "frames_per_video", 1)
-    previous = check.integer(doc["previous_frames"], "previous_frames", 0)
-    if frames <= previous:
-        check.fail("frames_per_video", f"must exceed previous_frames ({previous}), got {frames}")
-    camera = check.mapping({} if doc.get("camera") is None else doc["camera"], "camera",
-                           tuple(POOL_DEFAULTS) + tuple(PATH_DEFAULTS))
-    pool, motion = _camera(check, camera)
-    return DatasetConfig(file=file.resolve(), seed=check.integer(doc["seed"], "seed", 0),
-                         hr_size=_hr_size(check, doc["hr_size"], scales), scales=scales, frames_per_video=frames,
-                         previous_frames=previous, ground_truth=_ground_truth(check, doc.get("ground_truth")),
-                         pool=pool, path=motion, volumes=_volumes(check, doc["volumes"]))
+    doc = read_dataclass(_Document, read_yaml(file), file)
+    scales = _scales(file, doc.scales)
+    if doc.frames_per_video <= doc.previous_frames:
+        fail(file, "frames_per_video",
+             f"must exceed previous_frames ({doc.previous_frames}), got {doc.frames_per_video}")
+    pool, motion = _camera(file, doc.camera)
+    return DatasetConfig(file=file.resolve(), seed=doc.seed, hr_size=_hr_size(file, doc.hr_size, scales),
+                         scales=scales, frames_per_video=doc.frames_per_video, previous_frames=doc.previous_frames,
+                         ground_truth=asdict(doc.ground_truth), pool=pool, path=motion,
+                         volumes=_volumes(file, doc.volumes))
 
 
-def _scales(check: _Checker, value: Any) -> tuple[int, ...]:
-    if not isinstance(value, list) or not value:
-        check.fail("scales", f"expected a non-empty list of {SCALES}, got {_kind(value)}")
-    scales = [check.integer(s, "scales") for s in value]
+def _scales(file: Path, scales: tuple[int, ...]) -> tuple[int, ...]:
+    if not scales:
+        fail(file, "scales", f"expected a non-empty list of {SCALES}, got []")
     bad = [s for s in scales if s not in SCALES]
     if bad:
-        check.fail("scales", f"{bad[0]} is not one of {', '.join(map(str, SCALES))}")
+        fail(file, "scales", f"{bad[0]} is not one of {', '.join(map(str, SCALES))}")
     if len(set(scales)) != len(scales):
-        check.fail("scales", f"repeats a scale: {scales}")
+        fail(file, "scales", f"repeats a scale: {list(scales)}")
     return tuple(sorted(scales))
 
 
-def _hr_size(check: _Checker, value: Any, scales: tuple[int, ...]) -> tuple[int, int]:
+def _hr_size(file: Path, value: Any, scales: tuple[int, ...]) -> tuple[int, int]:
     if isinstance(value, list):
         if len(value) != 2:
-            check.fail("hr_size", f"expected an integer or [width, height], got {value!r}")
-        width, height = (check.integer(v, "hr_size", 1) for v in value)
+            fail(file, "hr_size", f"expected an integer or [width, height], got {value!r}")
+        width, height = (read_value(int, v, file, "hr_size", low=1) for v in value)
     else:
-        width = height = check.integer(value, "hr_size", 1)
+        width = height = read_value(int, value, file, "hr_size", low=1)
     for s in scales:
         if width % s or height % s:
-            check.fail("hr_size", f"{width}x{height} is not divisible by scale {s}")
+            fail(file, "hr_size", f"{width}x{height} is not divisible by scale {s}")
     return width, height
 
 
-def _ground_truth(check: _Checker, value: Any) -> dict[str, Any]:
-    gt = check.mapping({} if value is None else value, "ground_truth", ("mode", "spp"))
-    mode = gt.get("mode", "supersampled")
-    if mode not in GROUND_TRUTH_MODES:
-        check.fail("ground_truth.mode", f"must be one of {', '.join(GROUND_TRUTH_MODES)}, got {mode!r}")
-    return {"mode": mode, "spp": check.integer(gt.get("spp", 16), "ground_truth.spp", 1)}
+def _camera(file: Path, camera: _Camera) -> tuple[dict[str, Any], dict[str, Any]]:
+    """candidate_pool's and smooth_random_path's arguments ([low, high] pairs as lists)."""
+    for key in ("distance_range", "zoom_range"):
+        _ordered(file, f"camera.{key}", getattr(camera, key))
+    if not camera.zoom_range[0] <= 1.0 <= camera.zoom_range[1]:
+        fail(file, "camera.zoom_range", f"must contain 1 (the start camera), got {list(camera.zoom_range)}")
+    values = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(camera).items()}
+    pool = {k: v for k, v in values.items() if k in POOL_KEYS}
+    return pool, {k: v for k, v in values.items() if k not in POOL_KEYS}
 
 
-def _camera(check: _Checker, camera: dict) -> tuple[dict[str, Any], dict[str, Any]]:
-    c = {**POOL_DEFAULTS, **PATH_DEFAULTS, **camera}
-    pool = {"pool_size": check.integer(c["pool_size"], "camera.pool_size", 1),
-            "view_angle": check.number(c["view_angle"], "camera.view_angle", 1.0, 179.0),
-            "distance_range": check.pair(c["distance_range"], "camera.distance_range", 0.01),
-            "max_roll": check.number(c["max_roll"], "camera.max_roll", 0.0, 180.0),
-            "focal_jitter": check.number(c["focal_jitter"], "camera.focal_jitter", 0.0, 1.0)}
-    zoom = check.pair(c["zoom_range"], "camera.zoom_range", 0.01)
-    if not zoom[0] <= 1.0 <= zoom[1]:
-        check.fail("camera.zoom_range", f"must contain 1 (the start camera), got {zoom}")
-    path = {"max_orbit_speed": check.number(c["max_orbit_speed"], "camera.max_orbit_speed", 0.0, 90.0),
-            "max_elevation_speed": check.number(c["max_elevation_speed"], "camera.max_elevation_speed", 0.0, 90.0),
-            "zoom_range": zoom,
-            "max_elevation": check.number(c["max_elevation"], "camera.max_elevation", 0.1, 89.9),
-            "max_zoom_speed": check.number(c["max_zoom_speed"], "camera.max_zoom_speed", 0.0, 1.0),
-            "period": check.integer(c["period"], "camera.period", 1)}
-    return pool, path
+def _ordered(file: Path, key: str, pair: tuple[float, float]) -> None:
+    if not pair[0] <= pair[1]:
+        fail(file, key, f"needs low <= high, got {list(pair)}")
 
 
-def _volumes(check: _Checker, value: Any) -> tuple[VolumeSpec, ...]:
-    if not isinstance(value, list) or not value:
-        check.fail("volumes", f"expected a non-empty list of volume entries, got {_kind(value)}")
-    specs = tuple(_volume(check, entry, f"volumes[{i}]") for i, entry in enumerate(value))
+def _volumes(file: Path, entries: tuple[_VolumeEntry, ...]) -> tuple[VolumeSpec, ...]:
+    if not entries:
+        fail(file, "volumes", "expected a non-empty list of volume entries, got []")
+    specs = tuple(_volume(file, entry, f"volumes[{i}]") for i, entry in enumerate(entries))
     names = [s.name for s in specs]
     for i, name in enumerate(names):
         if name in names[:i]:
-            check.fail(f"volumes[{i}].name", f"{name!r} is used twice")
+            fail(file, f"volumes[{i}].name", f"{name!r} is used twice")
     return specs
 
 
-def _volume(check: _Checker, entry: Any, key: str) -> VolumeSpec:
-    entry = check.mapping(entry, key, VOLUME_KEYS, required=("name", "path", "transfer_function", "videos"))
-    name = check.text(entry["name"], f"{key}.name")
-    if not NAME.match(name):
-        check.fail(f"{key}.name", f"use letters, digits, '_', '-' and '.', got {name!r}")
-    if entry["path"] == PHANTOM:
-        written, source = PHANTOM, None
-        shape = entry.get("phantom_shape", list(PHANTOM_SHAPE))
-        if not isinstance(shape, list) or len(shape) != 3:
-            check.fail(f"{key}.phantom_shape", f"expected [z, y, x] voxels, got {shape!r}")
-        phantom_shape = tuple(check.integer(n, f"{key}.phantom_shape", 8) for n in shape)
+def _volume(file: Path, entry: _VolumeEntry, key: str) -> VolumeSpec:
+    if not NAME.match(entry.name):
+        fail(file, f"{key}.name", f"use letters, digits, '_', '-' and '.', got {entry.name!r}")
+    if entry.path == PHANTOM:
+        source, phantom_shape = None, entry.phantom_shape or PHANTOM_SHAPE
     else:
-        written, source = check.existing(entry["path"], f"{key}.path")
-        if "phantom_shape" in entry:
-            check.fail(f"{key}.phantom_shape", "only applies to path: phantom")
+        source = _existing(file, entry.path, f"{key}.path")
+        if entry.phantom_shape is not None:
+            fail(file, f"{key}.phantom_shape", "only applies to path: phantom")
         phantom_shape = None
-    tf, definition = _transfer_function(check, entry["transfer_function"], f"{key}.transfer_function")
-    split = entry.get("split")
-    if split is not None and split not in SPLITS:
-        check.fail(f"{key}.split", f"expected one of {', '.join(SPLITS)}, got {split!r}")
-    return VolumeSpec(name=name, path=written, source=source, phantom_shape=phantom_shape, transfer_function=tf,
-                      tf_definition=definition, videos=check.integer(entry["videos"], f"{key}.videos", 1), split=split)
+    tf, definition = _transfer_function(file, entry.transfer_function, f"{key}.transfer_function")
+    return VolumeSpec(name=entry.name, path=entry.path, source=source, phantom_shape=phantom_shape,
+                      transfer_function=tf, tf_definition=definition, videos=entry.videos, split=entry.split)
 
 
-def _transfer_function(check: _Checker, value: Any, key: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """``{preset, range?}`` or ``{file, name?, range?}`` (file resolved) and the function it loads."""
-    tf = check.mapping(value, key, ("preset", "file", "name", "range"))
-    if ("preset" in tf) == ("file" in tf):
-        check.fail(key, "needs exactly one of 'preset' or 'file'")
+def _existing(file: Path, written: str, key: str) -> Path:
+    """A path as written, resolved against the config's folder; it must exist."""
+    resolved = (file.parent / written).resolve()
+    if not resolved.exists():
+        fail(file, key, f"{resolved} does not exist")
+    return resolved
+
+
+def _transfer_function(file: Path, tf: _TransferFunctionEntry, key: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The entry as the manifest keeps it (a file resolved) and the function it loads."""
+    if (tf.preset is None) == (tf.file is None):
+        fail(file, key, "needs exactly one of 'preset' or 'file'")
+    if tf.preset is not None and tf.name is not None:
+        fail(file, f"{key}.name", "only applies with 'file'")
     out: dict[str, Any] = {}
     try:
-        if "preset" in tf:
-            if "name" in tf:
-                check.fail(f"{key}.name", "only applies with 'file'")
-            loaded = get_preset(check.text(tf["preset"], f"{key}.preset"))
+        if tf.preset is not None:
+            loaded = get_preset(tf.preset)
             out["preset"] = loaded.name
         else:
-            _, resolved = check.existing(tf["file"], f"{key}.file")
-            name = None if tf.get("name") is None else check.text(tf["name"], f"{key}.name")
-            loaded = load_transfer_function(resolved, name)
+            resolved = _existing(file, tf.file, f"{key}.file")
+            loaded = load_transfer_function(resolved, tf.name)
             out.update(file=str(resolved), name=loaded.name)
     except InputError as err:
-        if err.path == str(check.file):
+        if err.path == str(file):
             raise
-        check.fail(f"{key}.{'preset' if 'preset' in tf else 'file'}", str(err))
-    out["range"] = _range(check, tf.get("range"), f"{key}.range")
+        fail(file, f"{key}.{'preset' if tf.preset is not None else 'file'}", str(err))
+    out["range"] = _range(file, tf.range, f"{key}.range")
     return out, loaded.to_dict()
 
 
-def _range(check: _Checker, value: Any, key: str) -> str | list[float] | None:
+def _range(file: Path, value: Any, key: str) -> str | list[float] | None:
     if value is None or value == "auto":
         return value
-    lo, hi = check.pair(value, key)
+    lo, hi = read_value(tuple[float, float], value, file, key, expected="[low, high]")
+    _ordered(file, key, (lo, hi))
     if not lo < hi:
-        check.fail(key, f"needs low < high, got {value!r}")
+        fail(file, key, f"needs low < high, got {value!r}")
     return [lo, hi]

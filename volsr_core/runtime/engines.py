@@ -30,10 +30,15 @@ def choose_providers(available: Sequence[str] | None = None) -> list[str]:
     return [p for p in PROVIDER_ORDER if p in available] or ["CPUExecutionProvider"]
 
 
-def _network_config(mapping: dict[str, Any]):
+def _network_config(text: str, path: Path):
+    """The NetworkConfig in the ONNX metadata entry ``text`` (JSON) of the model at ``path``."""
     from volsr_core.sr.network_config import NetworkConfig
 
-    return NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in mapping.items()})
+    try:
+        mapping = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise InputError(path, f"{METADATA_KEY}: not valid JSON ({err})") from None
+    return NetworkConfig.from_dict(mapping, source=path, key=METADATA_KEY)
 
 
 class OnnxEngine:
@@ -70,7 +75,7 @@ class OnnxEngine:
         meta = self.session.get_modelmeta().custom_metadata_map
         if METADATA_KEY not in meta:
             raise InputError(self.path, f"an ONNX model without VolSR metadata ('{METADATA_KEY}')")
-        self.config = _network_config(json.loads(meta[METADATA_KEY]))
+        self.config = _network_config(meta[METADATA_KEY], self.path)
         self.input_names = [i.name for i in self.session.get_inputs()]
 
     def __call__(self, lr: np.ndarray, motion: np.ndarray, jitter: np.ndarray,

@@ -88,9 +88,7 @@ def load_model(path: str | os.PathLike, expected_sha256: str | None = None) -> "
     if payload.get("format") != MODEL_FORMAT and "model" not in payload:
         raise InputError(path, f"not a VolSR model file or training checkpoint (format {payload.get('format')!r})")
     try:
-        network = payload["network"]
-        model = SuperResolutionNet(NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v
-                                                    for k, v in network.items()}))
+        model = SuperResolutionNet(NetworkConfig.from_dict(payload["network"], source=path, key="network"))
         model.load_state_dict(payload["state_dict"] if "state_dict" in payload else payload["model"])
     except (KeyError, TypeError, ValueError, RuntimeError) as err:
         raise InputError(path, f"model file does not fit the network: {' '.join(str(err).split())[:160]}") from None

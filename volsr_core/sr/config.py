@@ -1,64 +1,124 @@
-"""Training configuration (YAML, BasicSR-style sections): read, validate, fill defaults."""
+"""Training configuration (YAML, BasicSR-style sections): read, check, fill defaults.
+
+:func:`load_training_config` reads a file into a :class:`TrainingConfig`, one frozen dataclass
+per section, with :func:`~volsr_core.config_reader.read_dataclass`: unknown keys, wrong types
+and bounds are one-line InputErrors (``"<file>: train.stepz: unknown key (allowed: ...)"``);
+left-out keys take the defaults below.
+"""
 from __future__ import annotations
 
-import copy
 import os
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
-import yaml
-
-from volsr_core.errors import InputError, read_text_file
-
-DEFAULTS: dict[str, Any] = {
-    "seed": 0,
-    "out": "runs/default",
-    "data": {"root": None, "scale": 4, "previous_frames": 2, "crop": 96,
-             "features": ["color", "depth", "max_rgba"], "augment": True, "num_workers": 0,
-             "val_crop": None},
-    "model": {"variant": "S", "fold": None, "widths": None, "recurrent": False, "taau_base": False, "init": None},
-    "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "min_lr_ratio": 0.05},
-    "train": {"steps": 1000, "batch_size": 8, "unroll": 1, "checkpoint_every": 200, "validate_every": None,
-              "amp": True, "max_val_samples": 64},
-    "loss": {"charbonnier_eps": 1e-3, "ssim_weight": 0.0, "temporal_weight": 0.0},
-}
+from volsr_core.config_reader import Source, read_dataclass, read_yaml, setting
 
 
-def _merge(base: dict[str, Any], update: dict[str, Any], path: str, source: Path) -> dict[str, Any]:
-    out = copy.deepcopy(base)
-    for key, value in update.items():
-        where = f"{path}{key}"
-        if key not in base:
-            raise InputError(source, f"unknown key '{where}' (known: {', '.join(sorted(base))})")
-        if isinstance(base[key], dict):
-            if not isinstance(value, dict):
-                raise InputError(source, f"'{where}' must be a mapping")
-            out[key] = _merge(base[key], value, where + ".", source)
-        else:
-            out[key] = value
+@dataclass(frozen=True, kw_only=True)
+class DataSection:
+    """The dataset and what the network is fed from it (crops in HR pixels; None: whole frames)."""
+
+    root: str = setting(expected="the dataset folder made by `volsr dataset`")
+    scale: int = 4
+    previous_frames: int = 2
+    crop: int | None = 96
+    features: tuple[str, ...] = ("color", "depth", "max_rgba")
+    augment: bool = True
+    num_workers: int = 0
+    val_crop: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelSection:
+    """The network: a sized variant (S, M, L), optionally with its own ``fold`` and ``widths``;
+    ``init`` names weights (model file or checkpoint) to fine-tune from."""
+
+    variant: str = "S"
+    fold: int | None = None
+    widths: tuple[int, ...] | None = None
+    recurrent: bool = False
+    taau_base: bool = False
+    init: str | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class OptimSection:
+    """AdamW with a linear warm-up, then a cosine down to ``min_lr_ratio`` of ``lr``."""
+
+    lr: float = 1e-3
+    weight_decay: float = 1e-4
+    warmup_steps: int = 100
+    min_lr_ratio: float = 0.05
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainSection:
+    """The loop: steps, batch, frames unrolled per sample, checkpoint and validation periods
+    (``validate_every`` None: once per epoch)."""
+
+    steps: int = setting(1000, low=1)
+    batch_size: int = setting(8, low=1)
+    unroll: int = setting(1, low=1)
+    checkpoint_every: int = setting(200, low=1)
+    validate_every: int | None = None
+    amp: bool = True
+    max_val_samples: int = 64
+
+
+@dataclass(frozen=True, kw_only=True)
+class LossSection:
+    """Charbonnier, plus SSIM and temporal terms at these weights."""
+
+    charbonnier_eps: float = 1e-3
+    ssim_weight: float = 0.0
+    temporal_weight: float = 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainingConfig:
+    """A checked training config; ``out`` is the run folder (checkpoints, log.csv)."""
+
+    seed: int = 0
+    out: str = "runs/default"
+    data: DataSection
+    model: ModelSection
+    optim: OptimSection
+    train: TrainSection
+    loss: LossSection
+
+    @classmethod
+    def from_dict(cls, mapping: Any, source: Source = None) -> TrainingConfig:
+        """The config in ``mapping`` (sections as in the file), checked; errors name ``source``."""
+        return read_dataclass(cls, mapping, source)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain sections (what a checkpoint stores); :meth:`from_dict` reads it back."""
+        return asdict(self)
+
+    def updated(self, changes: Mapping[str, Any]) -> TrainingConfig:
+        """This config with ``changes`` (sections as in the file, e.g. ``{"train": {"steps": 10}}``)
+        over it, checked again."""
+        return TrainingConfig.from_dict(_merged(self.to_dict(), changes), "config changes")
+
+
+def _merged(base: dict[str, Any], changes: Mapping[str, Any]) -> dict[str, Any]:
+    """``changes`` over ``base``, section by section."""
+    out = dict(base)
+    for key, value in changes.items():
+        both = isinstance(out.get(key), dict) and isinstance(value, Mapping)
+        out[key] = _merged(out[key], value) if both else value
     return out
 
 
-def load_training_config(path: str | os.PathLike) -> dict[str, Any]:
-    """The config at ``path`` over :data:`DEFAULTS`; ``data.root``, ``out`` and ``model.init`` (weights to
-    fine-tune from) resolved against the file's folder."""
+def load_training_config(path: str | os.PathLike) -> TrainingConfig:
+    """The config at ``path`` with defaults filled; ``data.root``, ``out`` and ``model.init``
+    (environment variables expanded) resolved against the file's folder."""
     source = Path(path)
-    text = read_text_file(source)
-    try:
-        raw = yaml.safe_load(text) or {}
-    except yaml.YAMLError as err:
-        raise InputError(source, f"not valid YAML: {' '.join(str(err).split())}") from None
-    if not isinstance(raw, dict):
-        raise InputError(source, "a training config is a YAML mapping")
-    config = _merge(DEFAULTS, raw, "", source)
-    if not config["data"]["root"]:
-        raise InputError(source, "'data.root' (the dataset folder made by `volsr dataset`) is required")
-    for section, key in (("data", "root"), (None, "out"), ("model", "init")):
-        holder = config[section] if section else config
-        if holder[key] is not None:
-            holder[key] = str((source.parent / os.path.expandvars(str(holder[key]))).resolve())
-    train = config["train"]
-    for key in ("steps", "batch_size", "unroll", "checkpoint_every"):
-        if not isinstance(train[key], int) or train[key] < 1:
-            raise InputError(source, f"'train.{key}' must be a positive integer, got {train[key]!r}")
-    return config
+    config = TrainingConfig.from_dict(read_yaml(source), source)
+
+    def resolved(written: str | None) -> str | None:
+        return None if written is None else str((source.parent / os.path.expandvars(written)).resolve())
+
+    return replace(config, out=resolved(config.out), data=replace(config.data, root=resolved(config.data.root)),
+                   model=replace(config.model, init=resolved(config.model.init)))

@@ -6,6 +6,9 @@ Slicer Python without torch) can read a model's configuration.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
+
+from volsr_core.config_reader import Source, read_dataclass
 
 FEATURE_CHANNELS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4}
 SCALES = (2, 4, 8, 16)
@@ -63,6 +66,12 @@ class NetworkConfig:
                 idx += list(range(offset, offset + FEATURE_CHANNELS[f]))
             offset += FEATURE_CHANNELS[f]
         return idx
+
+    @classmethod
+    def from_dict(cls, mapping: Any, source: Source = None, key: str = "") -> NetworkConfig:
+        """The config saved as ``mapping`` (:meth:`to_dict`, as JSON or in a weights file) at ``key``
+        in ``source``; an unknown key, a wrong type or an impossible shape is a one-line InputError."""
+        return read_dataclass(cls, mapping, source, key)
 
     def to_dict(self) -> dict:
         return asdict(self)

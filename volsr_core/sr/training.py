@@ -25,6 +25,7 @@ from torch.utils.data import DataLoader, Sampler
 from volsr_core.atomic import atomic_write
 from volsr_core.errors import InputError
 from volsr_core.sr.checkpoint import load_checkpoint, load_model, save_checkpoint
+from volsr_core.sr.config import TrainingConfig
 from volsr_core.sr.history import history_mode
 from volsr_core.sr.loader import SequenceDataset
 from volsr_core.sr.losses import ReconstructionLoss, temporal_charbonnier
@@ -74,12 +75,11 @@ class StepBatches(Sampler):
             yield [(epoch, int(i)) for i in picked[self.rank::self.world]]
 
 
-def build_model(config: dict[str, Any]) -> SuperResolutionNet:
-    data, model = config["data"], config["model"]
-    net = variant_config(model["variant"], data["scale"], data["previous_frames"], tuple(data["features"]),
-                         bool(model["recurrent"]), bool(model["taau_base"]))
-    overrides = {k: (tuple(v) if isinstance(v, list) else v) for k, v in model.items()
-                 if k in ("fold", "widths") and v is not None}
+def build_model(config: TrainingConfig) -> SuperResolutionNet:
+    data, model = config.data, config.model
+    net = variant_config(model.variant, data.scale, data.previous_frames, data.features, model.recurrent,
+                         model.taau_base)
+    overrides = {k: v for k, v in (("fold", model.fold), ("widths", model.widths)) if v is not None}
     if overrides:
         net = NetworkConfig(**{**net.to_dict(), **overrides})
     return SuperResolutionNet(net)
@@ -96,7 +96,7 @@ def lr_factor(step: int, warmup: int, total: int, min_ratio: float) -> float:
 class Trainer:
     """``Trainer(config).run()`` trains to ``train.steps``, resuming from ``out/checkpoints/last.pt``."""
 
-    def __init__(self, config: dict[str, Any], progress: bool = True):
+    def __init__(self, config: TrainingConfig, progress: bool = True):
         self.config, self.progress = config, progress
         self.world = int(os.environ.get("WORLD_SIZE", "1"))
         self.rank = int(os.environ.get("RANK", "0"))
@@ -105,31 +105,31 @@ class Trainer:
             dist.init_process_group("nccl" if self.device.type == "cuda" else "gloo")
         if self.device.type == "cuda":
             torch.cuda.set_device(self.device)
-        self.out = Path(config["out"])
-        data = config["data"]
+        self.out = Path(config.out)
+        data = config.data
         # a sample carries the frames of `unroll` steps: N previous frames for the oldest step, plus one per step
-        self.unroll = int(config["train"]["unroll"])
-        frames = data["previous_frames"] + self.unroll - 1
-        self.train_set = SequenceDataset(data["root"], "train", data["scale"], frames, data["crop"],
-                                         tuple(data["features"]), augment=data["augment"], seed=config["seed"],
-                                         hr_frames=self.unroll, taau=bool(config["model"]["taau_base"]))
-        self.val_set = SequenceDataset(data["root"], "val", data["scale"], frames, data["val_crop"],
-                                       tuple(data["features"]), augment=False, seed=config["seed"],
-                                       hr_frames=self.unroll, taau=bool(config["model"]["taau_base"]))
-        torch.manual_seed(config["seed"])
+        self.unroll = config.train.unroll
+        frames = data.previous_frames + self.unroll - 1
+        self.train_set = SequenceDataset(data.root, "train", data.scale, frames, data.crop,
+                                         data.features, augment=data.augment, seed=config.seed,
+                                         hr_frames=self.unroll, taau=config.model.taau_base)
+        self.val_set = SequenceDataset(data.root, "val", data.scale, frames, data.val_crop,
+                                       data.features, augment=False, seed=config.seed,
+                                       hr_frames=self.unroll, taau=config.model.taau_base)
+        torch.manual_seed(config.seed)
         self.model = build_model(config)
-        if config["model"]["init"]:
-            self._start_from(Path(config["model"]["init"]))
+        if config.model.init:
+            self._start_from(Path(config.model.init))
         self.model.to(self.device)
-        optim = config["optim"]
-        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=optim["lr"], weight_decay=optim["weight_decay"])
-        steps = config["train"]["steps"]
+        optim = config.optim
+        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=optim.lr, weight_decay=optim.weight_decay)
+        steps = config.train.steps
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
-            self.optimizer, lambda s: lr_factor(s, optim["warmup_steps"], steps, optim["min_lr_ratio"]))
-        self.amp = bool(config["train"]["amp"]) and self.device.type == "cuda"
+            self.optimizer, lambda s: lr_factor(s, optim.warmup_steps, steps, optim.min_lr_ratio))
+        self.amp = config.train.amp and self.device.type == "cuda"
         self.scaler = torch.amp.GradScaler("cuda", enabled=self.amp)
-        self.loss = ReconstructionLoss(config["loss"]["charbonnier_eps"], config["loss"]["ssim_weight"])
-        self.temporal_weight = float(config["loss"]["temporal_weight"])
+        self.loss = ReconstructionLoss(config.loss.charbonnier_eps, config.loss.ssim_weight)
+        self.temporal_weight = config.loss.temporal_weight
         self.step, self.best_psnr = 0, -math.inf
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.world > 1 else self.model)
 
@@ -147,7 +147,7 @@ class Trainer:
                 "optimizer": self.optimizer.state_dict(), "scheduler": self.scheduler.state_dict(),
                 "scaler": self.scaler.state_dict(), "step": self.step, "best_psnr": self.best_psnr,
                 "rng": {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()},
-                "config": self.config}
+                "config": self.config.to_dict()}
 
     def restore(self, path: Path) -> None:
         state = load_checkpoint(path, trusted=True)
@@ -163,24 +163,24 @@ class Trainer:
     # -- loop ----------------------------------------------------------------------------------
     def run(self, until: int | None = None) -> dict[str, Any]:
         """Train from the last checkpoint to ``train.steps`` (or stop after step ``until``, checkpointing)."""
-        cfg = self.config["train"]
+        cfg = self.config.train
         last = self.out / "checkpoints" / "last.pt"
         if last.exists():
             self.restore(last)
         if self.rank == 0:
             (self.out / "checkpoints").mkdir(parents=True, exist_ok=True)
             self._trim_log()
-        global_batch = cfg["batch_size"]
-        stop = cfg["steps"] if until is None else min(until, cfg["steps"])
-        sampler = StepBatches(len(self.train_set), global_batch, self.config["seed"], self.step, stop,
+        global_batch = cfg.batch_size
+        stop = cfg.steps if until is None else min(until, cfg.steps)
+        sampler = StepBatches(len(self.train_set), global_batch, self.config.seed, self.step, stop,
                               self.rank, self.world)
-        validate_every = cfg["validate_every"] or sampler.per_epoch
+        validate_every = cfg.validate_every or sampler.per_epoch
         loader = DataLoader(EpochSamples(self.train_set), batch_sampler=sampler,
-                            num_workers=self.config["data"]["num_workers"], persistent_workers=False)
+                            num_workers=self.config.data.num_workers, persistent_workers=False)
         bar = None
         if self.progress and self.rank == 0:
             from tqdm import tqdm
-            bar = tqdm(total=cfg["steps"], initial=self.step, desc="train", unit="step")
+            bar = tqdm(total=cfg.steps, initial=self.step, desc="train", unit="step")
         started = time.perf_counter()
         self.model.train()
         for batch in loader:
@@ -189,7 +189,7 @@ class Trainer:
             row = {"step": self.step, "epoch": (self.step - 1) // sampler.per_epoch, "loss": f"{loss:.6f}",
                    "lr": f"{self.scheduler.get_last_lr()[0]:.3e}", "val_psnr": "", "val_ssim": "",
                    "seconds": f"{time.perf_counter() - started:.1f}"}
-            if self.step % validate_every == 0 or self.step == cfg["steps"]:
+            if self.step % validate_every == 0 or self.step == cfg.steps:
                 metrics = self.validate()
                 row["val_psnr"], row["val_ssim"] = f"{metrics['psnr']:.3f}", f"{metrics['ssim']:.4f}"
                 if self.rank == 0 and metrics["psnr"] > self.best_psnr:
@@ -197,7 +197,7 @@ class Trainer:
                     save_checkpoint(self.out / "best.pt", self.model, extra={"step": self.step, **metrics})
             if self.rank == 0:
                 self._log(row)
-                if self.step % cfg["checkpoint_every"] == 0 or self.step == stop:
+                if self.step % cfg.checkpoint_every == 0 or self.step == stop:
                     save_checkpoint(last, state=self.state())
                     save_checkpoint(self.out / "checkpoints" / f"step_{self.step:07d}.pt", state=self.state())
                 if bar is not None:
@@ -239,7 +239,7 @@ class Trainer:
     def validate(self) -> dict[str, float]:
         """Mean PSNR/SSIM (scikit-image) on up to ``train.max_val_samples`` validation samples."""
         self.model.eval()
-        n = min(len(self.val_set), self.config["train"]["max_val_samples"])
+        n = min(len(self.val_set), self.config.train.max_val_samples)
         picks = np.linspace(0, len(self.val_set) - 1, n).round().astype(int) if n else []
         scores = []
         for i in picks:
