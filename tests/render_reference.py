@@ -28,7 +28,8 @@ def trilinear(vol: np.ndarray, p: np.ndarray) -> float:
 
 def render_reference(volume: Volume, tf: TransferFunction, camera: Camera, width: int, height: int,
                      step: float, jitter=(0.0, 0.0), previous: Camera | None = None,
-                     early_termination: float = 0.99, background=(0.0, 0.0, 0.0)) -> dict[str, np.ndarray]:
+                     early_termination: float = 0.99, background=(0.0, 0.0, 0.0), motion_depth: str = "threshold",
+                     depth_threshold: float = 0.5) -> dict[str, np.ndarray]:
     vol = volume.array.astype(np.float64)
     w2i = volume.world_to_index
     m = volume.direction @ np.diag(volume.spacing)
@@ -39,7 +40,8 @@ def render_reference(volume: Volume, tf: TransferFunction, camera: Camera, width
     right, up, fwd = camera.basis()
     depth_lo = (corners.mean(0) - camera.position) @ fwd - radius
     out = {k: np.zeros((height, width, c)) for k, c in
-           (("color", 3), ("alpha", 1), ("depth", 1), ("max_rgba", 4), ("position", 3), ("motion", 2))}
+           (("color", 3), ("alpha", 1), ("depth", 1), ("max_rgba", 4), ("position", 3), ("motion", 2),
+            ("motion_depth", 1))}
     for y in range(height):
         for x in range(width):
             px, py = x + 0.5 + jitter[0], y + 0.5 + jitter[1]
@@ -57,6 +59,7 @@ def render_reference(volume: Volume, tf: TransferFunction, camera: Camera, width
                 t0, t1 = max(t0, ta), min(t1, tb)
             color, acc, best, best_rgba = np.zeros(3), 0.0, 0.0, np.zeros(4)
             t_best = ((camera.focal_point - camera.position) @ fwd) / cosv
+            t_cross, sum_w, sum_wt = None, 0.0, 0.0
             if t0 <= t1:
                 for k in range(int(math.floor((t1 - t0) / step)) + 1):
                     t = t0 + k * step
@@ -78,7 +81,10 @@ def render_reference(volume: Volume, tf: TransferFunction, camera: Camera, width
                     if a > best:
                         best, best_rgba, t_best = a, np.append(rgb, a), t
                     color += (1 - acc) * a * rgb
+                    sum_w, sum_wt = sum_w + (1 - acc) * a, sum_wt + (1 - acc) * a * t
                     acc += (1 - acc) * a
+                    if t_cross is None and acc >= depth_threshold:
+                        t_cross = t
                     if acc >= early_termination:
                         break
             pos = o + t_best * d
@@ -87,8 +93,17 @@ def render_reference(volume: Volume, tf: TransferFunction, camera: Camera, width
             out["max_rgba"][y, x] = best_rgba
             out["position"][y, x] = pos
             out["depth"][y, x] = np.clip(((pos - camera.position) @ fwd - depth_lo) / (2 * radius), 0, 1) if best > 0 else 1.0
+            t_motion = t_best
+            if motion_depth == "threshold" and t_cross is not None:
+                t_motion = t_cross
+            elif motion_depth == "mean" and sum_w > 0:
+                t_motion = sum_wt / sum_w
+            mpos = o + t_motion * d
+            out["motion_depth"][y, x] = np.clip(((mpos - camera.position) @ fwd - depth_lo) / (2 * radius), 0, 1) \
+                if best > 0 else 1.0
             if previous is not None:
-                out["motion"][y, x] = previous.world_to_pixel(pos, width, height) - np.array([px, py])
+                out["motion"][y, x] = previous.world_to_pixel(mpos, width, height) - np.array([px, py])
     out["alpha"] = out["alpha"][..., 0]
     out["depth"] = out["depth"][..., 0]
+    out["motion_depth"] = out["motion_depth"][..., 0]
     return out

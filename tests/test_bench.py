@@ -9,7 +9,7 @@ import pytest
 
 from volsr_core.apps.bench.report import check_targets, curve_psnr_at, pareto_front
 from volsr_core.apps.bench.scenes import parse_volume_spec as parse_scene_spec
-from volsr_core.temporal.taau import resize_bilinear, upscale_bilinear
+from volsr_core.temporal.resample import resize_bilinear, upscale_bilinear
 
 SPP, FACTORS, SCALES = [1, 4], [2, 3, 4, 6, 8], [2, 4, 8]
 

@@ -12,7 +12,7 @@ from volsr_core.cli import main
 from volsr_core.io import make_phantom
 from volsr_core.render import RayCaster
 from volsr_core.scene import Camera, Volume, get_preset
-from volsr_core.scene.camera_paths import orbit, write_camera_path
+from volsr_core.scene.camera_paths import orbit, orbit_around, write_camera_path
 from volsr_core.temporal import render_supersampled
 
 
@@ -36,8 +36,9 @@ def test_render_one_png_equals_the_raycaster(tmp_path, phantom):
     assert main(["render", "--size", "48x32", "--out", str(out)]) == 0
     image = np.asarray(Image.open(out))
     assert image.shape == (32, 48, 3)
-    camera = orbit(Camera.framing(phantom.bounds), 1)[0].reset_clipping_range(phantom.bounds)
-    expected = RayCaster(phantom, get_preset("CT-Phantom")).render(camera, 48, 32).to_uint8()
+    caster = RayCaster(phantom, get_preset("CT-Phantom"))
+    camera = orbit_around(caster.visible_bounds(), 1, aspect=48 / 32)[0]  # the visible volume fills the view
+    expected = caster.render(camera, 48, 32).to_uint8()
     np.testing.assert_array_equal(image, expected)
     assert image.max() > 100
     assert not list(tmp_path.glob(".*")), "no temporary files may remain"
@@ -50,7 +51,7 @@ def test_render_orbit_with_features(tmp_path):
     assert [p.name for p in pngs] == ["frame_0000.png", "frame_0001.png", "frame_0002.png"]
     assert len(npzs) == 3
     with np.load(npzs[1]) as f:
-        assert set(f.files) == {"color", "alpha", "depth", "max_rgba", "position", "motion", "jitter"}
+        assert set(f.files) == {"color", "alpha", "depth", "max_rgba", "position", "motion", "motion_depth", "jitter"}
         assert f["color"].shape == (40, 40, 3) and f["motion"].shape == (40, 40, 2)
         assert np.abs(f["motion"]).max() > 1.0  # frame 1 moved 120 degrees from frame 0
     with np.load(npzs[0]) as f:
@@ -60,8 +61,9 @@ def test_render_orbit_with_features(tmp_path):
 def test_render_supersampled(tmp_path, phantom):
     out = tmp_path / "ss.png"
     assert main(["render", "--size", "32", "--spp", "4", "--out", str(out)]) == 0
-    camera = orbit(Camera.framing(phantom.bounds), 1)[0].reset_clipping_range(phantom.bounds)
-    expected = render_supersampled(RayCaster(phantom, get_preset("CT-Phantom")), camera, 32, 32, spp=4)
+    caster = RayCaster(phantom, get_preset("CT-Phantom"))
+    camera = orbit_around(caster.visible_bounds(), 1)[0]
+    expected = render_supersampled(caster, camera, 32, 32, spp=4)
     image = np.asarray(Image.open(out)).astype(np.float32) / 255
     assert np.abs(image - expected).max() <= 0.5 / 255 + 1e-6
 
@@ -93,8 +95,8 @@ def test_render_with_taa_accumulates_over_the_path(tmp_path, phantom):
     from volsr_core.temporal import TemporalAntiAliasing, halton_jitter
 
     assert main(["render", "--orbit", "4", "--size", "32", "--taa", "--out", str(tmp_path / "taa")]) == 0
-    cameras = [c.reset_clipping_range(phantom.bounds) for c in orbit(Camera.framing(phantom.bounds), 4)]
     caster, taa, previous = RayCaster(phantom, get_preset("CT-Phantom")), TemporalAntiAliasing(), None
+    cameras = orbit_around(caster.visible_bounds(), 4)
     for i, camera in enumerate(cameras):
         frame = caster.render(camera, 32, 32, jitter=halton_jitter(i, 16), previous_camera=previous, seed=i)
         expected, previous = taa(frame.color, frame.motion), camera

@@ -106,11 +106,12 @@ def test_stores_hold_the_documented_datasets(reference):
     manifest = json.loads((reference / "manifest.json").read_text())
     layout = store_layout(4, (64, 64), (2, 4))
     assert set(layout) == {"hr/color", "cameras"} | {f"lr{s}/{n}" for s in (2, 4) for n in
-                                                     ("color", "alpha", "depth", "max_rgba", "motion", "jitter")}
+                                                     ("color", "alpha", "depth", "max_rgba", "motion_depth",
+                                                      "centred", "motion", "jitter")}
     for video in manifest["videos"]:
         with h5py.File(reference / video["file"], "r") as h5:
             assert dict(h5.attrs) == {"video": video["id"], "volume": video["volume"], "format": "volsr-video",
-                                      "version": 1}
+                                      "version": 2}
             found = set()
             h5.visititems(lambda name, node: found.add(name) if isinstance(node, h5py.Dataset) else None)
             assert found == set(layout)
@@ -126,6 +127,10 @@ def test_stores_hold_the_documented_datasets(reference):
                 assert np.all(motion[0] == 0) and np.all(np.abs(motion[1:]).max(axis=(1, 2, 3)) > 0)  # none at t=0
                 depth = h5[f"lr{s}/depth"][:]
                 assert depth.min() < 1.0 and depth.max() == 1.0  # background is 1
+                motion_depth = h5[f"lr{s}/motion_depth"][:]
+                assert np.all(motion_depth[depth == 1.0] == 1.0) and motion_depth.min() < 1.0
+                centred, jittered = h5[f"lr{s}/centred"][:], h5[f"lr{s}/color"][:]
+                assert centred.shape == jittered.shape and not np.array_equal(centred, jittered), "no jitter there"
             cameras = h5["cameras"][:]
             np.testing.assert_allclose(cameras[:, :3], [c["position"] for c in video["cameras"]])
             assert np.all(cameras[:, 14:] == 0)

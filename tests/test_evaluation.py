@@ -31,7 +31,7 @@ def test_eval_writes_the_report_for_every_method(tiny_sequences, tmp_path, capsy
     assert main(["eval", str(tmp_path / "model.pt"), "--data", str(tiny_sequences), "--out", str(tmp_path / "r")]) == 0
     printed = capsys.readouterr().out
     results = json.loads((tmp_path / "r" / "eval.json").read_text())
-    assert set(results["overall"]) == set(METHODS)
+    assert set(results["overall"]) == set(METHODS) == set(results["methods"]), "a version-2 store: every method"
     (video,) = results["videos"].values()  # the one test video, frame 2 (the first with 2 previous)
     assert video["frames"] == [2]
     for name in METHODS:

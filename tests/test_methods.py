@@ -14,7 +14,8 @@ from volsr_core.sr.history import HistoryFeed, pick_history, taau_upsampler
 from volsr_core.sr.network_config import variant_config
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
 from volsr_core.temporal.supersample import render_supersampled
-from volsr_core.temporal.taau import TemporalUpsampler, resize_bilinear, upscale_bicubic
+from volsr_core.temporal.resample import resize_bilinear, upscale_bicubic
+from volsr_core.temporal.taau import TemporalUpsampler, view_rotation
 
 SIZE = (48, 40)
 
@@ -59,7 +60,8 @@ def test_taau_method_is_halton_jittered_frames_through_the_networks_taau(caster)
         frame = method(camera)
         lr = caster.render(camera, 24, 20, jitter=halton_jitter(t, jitter_phases(2)), previous_camera=previous)
         assert frame.low_resolution.jitter == lr.jitter
-        assert np.array_equal(frame.image, upsampler(lr.color, lr.motion, lr.jitter))
+        expected = upsampler(lr.color, lr.motion, lr.jitter, lr.motion_depth, view_rotation(camera, previous))
+        assert np.array_equal(frame.image, expected)
         previous = camera
     method.reset()
     assert method.previous is None and method.upsampler.history is None

@@ -16,9 +16,10 @@ def psnr_where(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def orbit_pair():
-    """Frames t-1 and t of the phantom, 256², the camera orbiting 2 degrees between them."""
+    """Frames t-1 and t of the phantom, 256², the camera orbiting 2 degrees between them; motion vectors
+    reproject the max-alpha point, which is also the ``position`` feature."""
     volume = Volume.from_record(make_phantom())
-    caster = RayCaster(volume, get_preset("CT-Soft-Tissue"))
+    caster = RayCaster(volume, get_preset("CT-Soft-Tissue"), motion_depth="max_alpha")
     previous = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.2)).zoom(1.6)
     current = previous.azimuth(2.0).reset_clipping_range(volume.bounds)
     return caster.render(previous, 256), caster.render(current, 256, previous_camera=previous)

@@ -26,12 +26,14 @@ SCRIPT = textwrap.dedent("""
     volume = oblique_volume()
     camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1)).zoom(2.0)
     kwargs = dict(jitter=(0.2, -0.1), previous_camera=camera.azimuth(3))
-    cpu = RayCaster(volume, shaded_tf(), block_size=4).render(camera, 8, 6, **kwargs)
-    gpu = RayCaster(volume, shaded_tf(), block_size=4, device="cuda").render(camera, 8, 6, **kwargs)
-    assert cpu.alpha.max() > 0.5, "scene must be visible"
-    err = np.abs(cpu.data - gpu.data)
-    print("max abs difference", err.max())
-    assert err.max() < 1e-4, err.max()
+    for mode, jitter in (("max_alpha", False), ("threshold", True), ("mean", "ign")):
+        opts = dict(block_size=4, motion_depth=mode, start_jitter=jitter)
+        cpu = RayCaster(volume, shaded_tf(), **opts).render(camera, 8, 6, seed=3, **kwargs)
+        gpu = RayCaster(volume, shaded_tf(), device="cuda", **opts).render(camera, 8, 6, seed=3, **kwargs)
+        assert cpu.alpha.max() > 0.5, "scene must be visible"
+        err = np.abs(cpu.data - gpu.data)
+        print(mode, jitter, "max abs difference", err.max())
+        assert err.max() < 1e-4, err.max()
 """)
 
 

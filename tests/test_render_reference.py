@@ -51,6 +51,30 @@ def test_every_buffer_matches_the_float64_reference(parallel):
         assert err.mean() <= 1e-3, f"{name}: mean abs error {err.mean():.2e}"
 
 
+@pytest.mark.parametrize("motion_depth", ["max_alpha", "threshold", "mean"])
+def test_motion_vectors_reproject_the_chosen_point(motion_depth):
+    """P_DEPTH_MODE: the motion vectors (and motion_depth) follow the chosen point; the max-alpha
+    features (depth, position, max_rgba) do not change with it."""
+    volume = oblique_volume()
+    tf = shaded_tf()
+    camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1)).zoom(2.0)
+    previous = camera.azimuth(4).elevation(-3)
+    w, h, step, jitter = 14, 11, 0.4, (0.23, -0.31)
+    caster = RayCaster(volume, tf, sample_distance=step, block_size=4, motion_depth=motion_depth,
+                       depth_threshold=0.4)
+    frame = caster.render(camera, w, h, jitter=jitter, previous_camera=previous)
+    ref = render_reference(volume, tf, camera, w, h, step, jitter=jitter, previous=previous,
+                           motion_depth=motion_depth, depth_threshold=0.4)
+    for name in ("motion", "motion_depth", "depth", "position", "max_rgba"):
+        err = np.abs(getattr(frame, name) - ref[name])
+        assert err.mean() <= 1e-3, f"{name}: mean abs error {err.mean():.2e}"
+    if motion_depth != "max_alpha":
+        paper = RayCaster(volume, tf, sample_distance=step, block_size=4, motion_depth="max_alpha").render(
+            camera, w, h, jitter=jitter, previous_camera=previous)
+        assert np.abs(paper.motion - frame.motion).max() > 0.05, "the choice must matter in this scene"
+        np.testing.assert_array_equal(paper.depth, frame.depth)
+
+
 def test_empty_space_skipping_changes_nothing():
     volume = oblique_volume()
     tf = TransferFunction(color=[[0, 1, 1, 1]], scalar_opacity=[[400, 0.0], [600, 0.8]])  # most bricks empty

@@ -147,7 +147,7 @@ def test_a_taau_based_upscaler_runs_taau_and_starts_as_it():
     rng = np.random.default_rng(2)
     for k in range(3):
         frame = feature_frame(rng, jitter=(0.2 * k - 0.3, 0.1), motion=0.0 if k == 0 else 0.4)
-        expected = taau(frame.color, np.asarray(frame.motion) * (k > 0), frame.jitter)
+        expected = taau(frame.color, np.asarray(frame.motion) * (k > 0), frame.jitter, frame.motion_depth, 0.0)
         assert np.allclose(upscaler.upscale(frame), np.clip(expected, 0, 1), atol=1e-5)
 
 

@@ -43,13 +43,16 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 # -- volsr render ---------------------------------------------------------------------------------
-def cameras_for(args: argparse.Namespace, volume, n_default: int = 1) -> list:
-    """The cameras ``--camera-path`` or ``--orbit``/``--degrees``/``--elevation`` ask for."""
+def cameras_for(args: argparse.Namespace, caster, n_default: int = 1) -> list:
+    """The cameras ``--camera-path`` asks for, or ``--orbit``/``--degrees``/``--elevation``: an orbit
+    framing what ``caster``'s transfer function shows of its volume (``RayCaster.visible_bounds``)."""
     from volsr_core.scene.camera_paths import orbit_around, read_camera_path
 
     if args.camera_path:
         return read_camera_path(args.camera_path)
-    return orbit_around(volume.bounds, args.orbit or n_default, args.degrees, args.elevation)
+    width, height = args.size
+    return orbit_around(caster.visible_bounds(), args.orbit or n_default, args.degrees, args.elevation,
+                        aspect=width / height)
 
 
 def output_paths(out: str, n_frames: int) -> tuple[list[Path], Path]:
@@ -78,11 +81,11 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise InputError(None, "--taa accumulates one jittered sample per frame; it does not combine with --spp")
     volume = load_volume_argument(args)
     tf = choose_transfer_function(volume, args.preset, args.tf, args.tf_name, args.range)
-    cameras = cameras_for(args, volume)
-    width, height = args.size
-    pngs, _ = output_paths(args.out, len(cameras))
     caster = RayCaster(volume, tf, sample_distance=args.sample_distance, device=args.device,
                        background=args.background)
+    cameras = cameras_for(args, caster)
+    width, height = args.size
+    pngs, _ = output_paths(args.out, len(cameras))
     taa = TemporalAntiAliasing() if args.taa else None
     previous = None
     started = time.perf_counter()
@@ -132,15 +135,15 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 # -- volsr eval -----------------------------------------------------------------------------------
 def cmd_eval(args: argparse.Namespace) -> int:
-    from volsr_core.apps.evaluate import METHODS, evaluate, write_report
+    from volsr_core.apps.evaluate import evaluate, write_report
     from volsr_core.sr.checkpoint import load_model
 
     model = load_model(args.model)
     results, showcase = evaluate(model, args.data, args.split)
     written = write_report(results, showcase, args.out)
-    for name in METHODS:
+    for name in results["methods"]:
         o = results["overall"][name]
-        print(f"{name:9s} PSNR {o['psnr']:6.2f} dB   SSIM {o['ssim']:.4f}   temporal error {o['temporal']:.4f}")
+        print(f"{name:18s} PSNR {o['psnr']:6.2f} dB   SSIM {o['ssim']:.4f}   temporal error {o['temporal']:.4f}")
     print(f"wrote {', '.join(p.name for p in written)} to {args.out}")
     return 0
 
@@ -201,10 +204,10 @@ def cmd_upscale(args: argparse.Namespace) -> int:
             volume = load_volume_argument(argparse.Namespace(volume=item.source, series=args.series,
                                                              resample=args.resample))
             tf = choose_transfer_function(volume, args.preset, args.tf, args.tf_name, args.range)
-            cameras = cameras_for(args, volume, n_default=24)
+            caster = RayCaster(volume, tf, sample_distance=args.sample_distance, background=args.background,
+                               device=args.device)
+            cameras = cameras_for(args, caster, n_default=24)
             if model is None:  # --variant auto, decided once at the first input that loads
-                caster = RayCaster(volume, tf, sample_distance=args.sample_distance, background=args.background,
-                                   device=args.device)
                 variant, model = batch.auto_variant(caster, cameras[0], args.size, args.scale, device=args.device)
             pipeline = Pipeline(volume, tf, model, scale=args.scale, size=args.size, variant=variant,
                                 device=args.device, sample_distance=args.sample_distance, background=args.background)

@@ -1,7 +1,9 @@
 """``volsr eval``: the network against bilinear, bicubic and TAAU on the same frames of a dataset split.
 
-Per video and frame t >= N (the frames the network can see N previous frames for): PSNR and
-SSIM from scikit-image against the HR ground truth, and a temporal-stability error: the mean
+The methods (``results["methods"]``, in :data:`METHODS` order): "bilinear" (the unjittered LR
+render upscaled, what VTK shows; version-2 stores only), the jittered LR frame upscaled bilinearly
+and bicubically, TAAU and VolSR. Per video and frame t >= N (the frames the network can see N
+previous frames for): PSNR and SSIM from scikit-image against the HR ground truth, and a temporal-stability error: the mean
 absolute difference between the output's and the ground truth's frame-to-frame change after
 backward-warping frame t-1 onto t with the (upsampled) motion vectors, over pixels whose
 reprojection stays on screen. Lower is steadier; 0 means the output flickers exactly as the
@@ -23,15 +25,16 @@ import numpy as np
 import torch
 
 from volsr_core.atomic import atomic_write
+from volsr_core.dataset.store import view_rotations
 from volsr_core.runtime.methods import ReducedSize, Taau
 from volsr_core.sr.history import HistoryFeed
 from volsr_core.sr.loader import SequenceDataset
 from volsr_core.sr.metrics import psnr_ssim
 from volsr_core.sr.network import SuperResolutionNet
-from volsr_core.temporal.taau import upscale_bilinear
+from volsr_core.temporal.resample import upscale_bilinear
 from volsr_core.temporal.warp import backward_warp
 
-METHODS = ("bilinear", "bicubic", "TAAU", "VolSR")
+METHODS = ("bilinear", "bilinear, jittered", "bicubic, jittered", "TAAU", "VolSR")  # "bilinear": version-2 stores
 
 
 def temporal_error(out_prev: np.ndarray, out: np.ndarray, gt_prev: np.ndarray, gt: np.ndarray,
@@ -44,28 +47,42 @@ def temporal_error(out_prev: np.ndarray, out: np.ndarray, gt_prev: np.ndarray, g
 
 
 class VideoFrames:
-    """One video's LR colour, motion, jitter and HR ground truth at one scale, read from its store."""
+    """One video's LR frames at one scale (jittered colour, motion, jitter, motion depth, and the unjittered
+    ``centred`` colour when the store has it: version 2), view rotations and HR ground truth, from its store."""
 
     def __init__(self, path: Path, scale: int):
         with h5py.File(path, "r") as h5:
             self.lr = h5[f"lr{scale}/color"][()].astype(np.float32)
             self.motion = h5[f"lr{scale}/motion"][()].astype(np.float32)
             self.jitter = h5[f"lr{scale}/jitter"][()].astype(np.float32)
+            depth = f"lr{scale}/motion_depth" if f"lr{scale}/motion_depth" in h5 else f"lr{scale}/depth"
+            self.depth = h5[depth][()].astype(np.float32)
+            self.centred = h5[f"lr{scale}/centred"][()].astype(np.float32) if f"lr{scale}/centred" in h5 else None
+            self.rotation = view_rotations(h5["cameras"][()])
             self.hr = h5["hr/color"][()].astype(np.float32)
+
+    def taau_inputs(self, t: int) -> tuple:
+        """Frame t as TAAU takes it: colour, motion, jitter, depth, rotation."""
+        return self.lr[t], self.motion[t], tuple(self.jitter[t]), self.depth[t], float(self.rotation[t])
 
     def hr_motion(self, t: int, scale: int) -> np.ndarray:
         return upscale_bilinear(self.motion[t], scale) * scale
 
 
 def _baselines(video: VideoFrames, scale: int) -> dict[str, Callable[[int], np.ndarray]]:
-    """Each baseline's frame t: the methods' upscaling stages on the stored LR frames."""
+    """Each baseline's frame t: the methods' upscaling stages on the stored LR frames. "bilinear" upscales
+    the unjittered LR render (what VTK's ImageSampleDistance shows) when the store has it; the jittered
+    frames' bilinear and bicubic upscales are the super-resolution papers' baselines."""
     h, w = video.hr.shape[1:3]
     bilinear, bicubic = (ReducedSize(None, (w, h), scale, kind) for kind in ("bilinear", "bicubic"))
     taau = Taau(None, (w, h), scale)
-    taau_frames = [taau.upscale(video.lr[t], video.motion[t], tuple(video.jitter[t])) for t in range(len(video.lr))]
-    return {"bilinear": lambda t: bilinear.upscale(video.lr[t]),
-            "bicubic": lambda t: bicubic.upscale(video.lr[t]),
-            "TAAU": lambda t: taau_frames[t]}
+    taau_frames = [taau.upscale(*video.taau_inputs(t)) for t in range(len(video.lr))]
+    methods = {"bilinear, jittered": lambda t: bilinear.upscale(video.lr[t]),
+               "bicubic, jittered": lambda t: bicubic.upscale(video.lr[t]),
+               "TAAU": lambda t: taau_frames[t]}
+    if video.centred is not None:
+        methods["bilinear"] = lambda t: bilinear.upscale(video.centred[t])
+    return methods
 
 
 @torch.no_grad()
@@ -98,7 +115,7 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
         feed = HistoryFeed(cfg)
         samples = {data.samples[index][1]: index for index in indices}  # frame t -> sample
         for t in range(len(frames.lr)):
-            history = feed(frames.lr[t], frames.motion[t], tuple(frames.jitter[t]))
+            history = feed(*frames.taau_inputs(t))
             if t not in samples:  # before frame N: only the history follows the video
                 continue
             item = data[samples[t]]
@@ -112,9 +129,11 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
             network_out[t] = np.clip(out[0].permute(1, 2, 0).numpy(), 0.0, 1.0)
             feed.keep(out[0].permute(1, 2, 0).numpy())
         methods["VolSR"] = network_out.__getitem__
+        names = [name for name in METHODS if name in methods and all(name in v for v in results["videos"].values())]
+        results["methods"] = names
         ts = sorted(network_out)
         video: dict[str, Any] = {"volume": meta["volume"], "frames": ts}
-        for name in METHODS:
+        for name in names:
             outputs = {t: methods[name](t) for t in ts}
             scores = [psnr_ssim(outputs[t], frames.hr[t], channel_axis=-1) for t in ts]
             temporal = [temporal_error(outputs[a], outputs[b], frames.hr[a], frames.hr[b],
@@ -123,9 +142,9 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
         results["videos"][meta["id"]] = video
         if not showcase:
             middle = ts[len(ts) // 2]
-            showcase = {"ground truth": frames.hr[middle], **{name: methods[name](middle) for name in METHODS}}
+            showcase = {"ground truth": frames.hr[middle], **{name: methods[name](middle) for name in names}}
     results["overall"] = {name: {metric: _mean([v for video in results["videos"].values() for v in video[name][metric]])
-                                 for metric in ("psnr", "ssim", "temporal")} for name in METHODS}
+                                 for metric in ("psnr", "ssim", "temporal")} for name in results["methods"]}
     return results, showcase
 
 
@@ -161,11 +180,11 @@ def markdown_table(results: dict[str, Any]) -> str:
     lines = [f"Split `{results['split']}`, {results['scale']}x, {results['previous_frames']} previous frames. "
              "PSNR/SSIM: higher is better; temporal error: lower is better.", "",
              "| video | volume | method | PSNR dB | SSIM | temporal error |", "|---|---|---|---|---|---|"]
-    for name in METHODS:
+    for name in results["methods"]:
         o = results["overall"][name]
         lines.append(f"| **all** | | {name} | **{o['psnr']:.2f}** | **{o['ssim']:.4f}** | **{o['temporal']:.4f}** |")
     for vid, video in results["videos"].items():
-        for name in METHODS:
+        for name in results["methods"]:
             m = video[name]
             lines.append(f"| {vid} | {video['volume']} | {name} | {_mean(m['psnr']):.2f} | {_mean(m['ssim']):.4f} "
                          f"| {_mean(m['temporal']):.4f} |")
@@ -191,7 +210,7 @@ def write_report(results: dict[str, Any], showcase: dict[str, np.ndarray], out_d
     offset = 0
     for vid, video in results["videos"].items():
         x = np.arange(offset, offset + len(video["frames"]))
-        for i, name in enumerate(METHODS):
+        for i, name in enumerate(results["methods"]):
             ax.plot(x, video[name]["psnr"], color=f"C{i}", label=name if offset == 0 else None)
         offset += len(video["frames"]) + 2
     ax.set_xlabel("frame (videos one after another)")
@@ -201,8 +220,9 @@ def write_report(results: dict[str, Any], showcase: dict[str, np.ndarray], out_d
     _save(fig, out / "psnr_per_frame.png")
     fig, axes = plt.subplots(1, 3, figsize=(10, 3.2))
     for ax, metric in zip(axes, ("psnr", "ssim", "temporal")):
-        values = [results["overall"][m][metric] for m in METHODS]
-        ax.bar(METHODS, values, color=[f"C{i}" for i in range(len(METHODS))])
+        names = results["methods"]
+        values = [results["overall"][m][metric] for m in names]
+        ax.bar(names, values, color=[f"C{i}" for i in range(len(names))])
         ax.set_title({"psnr": "PSNR (dB)", "ssim": "SSIM", "temporal": "temporal error"}[metric])
         ax.tick_params(axis="x", rotation=30)
         if metric == "psnr":

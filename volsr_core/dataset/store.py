@@ -21,11 +21,11 @@ from volsr_core.errors import InputError
 
 STORE_FORMAT = "volsr-video"
 MANIFEST_FORMAT = "volsr-dataset"
-VERSION = 1
+VERSION = 2  # 2: lr{s}/motion_depth and lr{s}/centred; ray starts jittered per frame and ground-truth sample
 GZIP_LEVEL = 4
 CAMERA_COLUMNS = 22
 # LR feature buffers: name -> channels (None: no channel axis)
-LR_BUFFERS: dict[str, int | None] = {"color": 3, "alpha": None, "depth": None, "max_rgba": 4}
+LR_BUFFERS: dict[str, int | None] = {"color": 3, "alpha": None, "depth": None, "max_rgba": 4, "motion_depth": None}
 IMAGE_DTYPE = np.dtype(np.float16)
 VECTOR_DTYPE = np.dtype(np.float32)
 
@@ -38,10 +38,21 @@ def store_layout(frames: int, hr_size: tuple[int, int], scales: tuple[int, ...])
         h, w = height // s, width // s
         for name, channels in LR_BUFFERS.items():
             layout[f"lr{s}/{name}"] = ((frames, h, w) + ((channels,) if channels else ()), IMAGE_DTYPE)
+        layout[f"lr{s}/centred"] = ((frames, h, w, 3), IMAGE_DTYPE)  # unjittered colour: the reduced-size render
         layout[f"lr{s}/motion"] = ((frames, h, w, 2), VECTOR_DTYPE)
         layout[f"lr{s}/jitter"] = ((frames, 2), VECTOR_DTYPE)
     layout["cameras"] = ((frames, CAMERA_COLUMNS), np.dtype(np.float64))
     return layout
+
+
+def view_rotations(cameras: np.ndarray) -> np.ndarray:
+    """Degrees the view turned into each frame from the one before (0 for frame 0), from the store's
+    ``cameras`` rows (position, then focal point, mm): the angle between directions of projection."""
+    rows = np.asarray(cameras, dtype=np.float64)
+    forward = rows[:, 3:6] - rows[:, 0:3]
+    forward /= np.linalg.norm(forward, axis=1, keepdims=True)
+    cos = np.clip(np.sum(forward[1:] * forward[:-1], axis=1), -1.0, 1.0)
+    return np.concatenate([[0.0], np.degrees(np.arccos(cos))])
 
 
 def raw_bytes(layout: Mapping[str, tuple[tuple, np.dtype]]) -> int:

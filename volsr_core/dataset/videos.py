@@ -9,7 +9,10 @@
   start camera and path from ``[seed, 3, volume index, video index within the volume]``.
 - Per frame t: the HR ground truth (:func:`ground_truth_frames`), and per scale s one LR render
   without anti-aliasing, jittered by ``halton_jitter(t, ceil(8 s^2))`` (FSR2's phase count),
-  with the previous frame's camera so that the motion vectors point to frame t-1 (zero at t=0).
+  with the previous frame's camera so that the motion vectors point to frame t-1 (zero at t=0),
+  plus the unjittered LR colour (``centred``: what a reduced-size render shows, for the baselines).
+  Ray starts are jittered per pixel (interleaved gradient noise) with the frame number as seed, and
+  per ground-truth sample.
 - A video's store is written frame by frame to ``.vNNNN.h5.part`` and renamed when whole; then
   its JSON entry is written; then ``manifest.json`` is rebuilt from every entry present.
 """
@@ -134,7 +137,8 @@ def load_dataset_volume(config: DatasetConfig, volume_index: int, device: str = 
     n = pool_args.pop("pool_size")
     pool_args["distance_range"] = tuple(pool_args["distance_range"])
     pool = candidate_pool(volume.bounds, n, rng_for(config.seed, POOL_TAG, volume_index), **pool_args)
-    return DatasetVolume(spec.name, volume, tf, RayCaster(volume, tf, device=device), pool)
+    caster = RayCaster(volume, tf, device=device, start_jitter="ign")  # ray starts jittered per frame / sample
+    return DatasetVolume(spec.name, volume, tf, caster, pool)
 
 
 def camera_path(config: DatasetConfig, source: DatasetVolume, plan: VideoPlan) -> list[Camera]:
@@ -167,11 +171,13 @@ def render_frames(config: DatasetConfig, source: DatasetVolume, cameras: list[Ca
         frame = {"hr/color": hr, "cameras": camera_row(camera)}
         for s in config.scales:
             jitter = halton_jitter(t, jitter_phases(s))
+            centred = source.caster.render(camera, width // s, height // s, seed=t).color.copy()
             lr = source.caster.render(camera, width // s, height // s, jitter=jitter,
-                                     previous_camera=cameras[t - 1] if t else None, out=buffers[s])
+                                     previous_camera=cameras[t - 1] if t else None, seed=t, out=buffers[s])
             buffers[s] = lr.data
             frame.update({f"lr{s}/color": lr.color, f"lr{s}/alpha": lr.alpha, f"lr{s}/depth": lr.depth,
-                          f"lr{s}/max_rgba": lr.max_rgba, f"lr{s}/motion": lr.motion,
+                          f"lr{s}/max_rgba": lr.max_rgba, f"lr{s}/motion_depth": lr.motion_depth,
+                          f"lr{s}/centred": centred, f"lr{s}/motion": lr.motion,
                           f"lr{s}/jitter": np.asarray(jitter, dtype=np.float32)})
         yield frame
 

@@ -425,7 +425,8 @@ def orbit_and_upscale(volume: Volume, tf: TransferFunction, out: str | Path, *, 
     shown = apply_transfer_function(display, tf)
     if tf.gradient_opacity is not None:
         log("note: ParaView 5.11 has no gradient opacity for volumes; it is left out here and in VolSR's frames")
-    cameras = orbit_around(volume.bounds, frames, degrees / frames, elevation, aspect=width / height)
+    # ParaView's own first render resets its camera to the bounding-sphere framing: start there
+    cameras = orbit_around(volume.bounds, frames, degrees / frames, elevation, aspect=width / height, fill=None)
     upscaler = ViewUpscaler(view, display, volume=volume, model=model, scale=scale, variant=variant,
                             device=device, threads=threads)
     used_cameras, timings = [], []

@@ -9,7 +9,7 @@ import numpy as np
 from volsr_core.atomic import atomic_write
 from volsr_core.images import to_uint8
 from volsr_core.render.layout import (
-    OUT_ALPHA, OUT_CHANNELS, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA, OUT_MOTION, OUT_POSITION,
+    OUT_ALPHA, OUT_CHANNELS, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA, OUT_MOTION, OUT_MOTION_DEPTH, OUT_POSITION,
 )
 from volsr_core.scene.camera import Camera
 
@@ -26,9 +26,11 @@ class FeatureFrame:
     - ``max_rgba`` (H, W, 4): shaded RGB and step-corrected alpha of that sample; 0 for background;
     - ``position`` (H, W, 3): its world position in mm (LPS); background pixels (``max_rgba``
       alpha 0) hold their ray's point on the focal plane;
-    - ``motion`` (H, W, 2): pixels from the current pixel to where ``position`` was in the
+    - ``motion`` (H, W, 2): pixels from the current pixel to where the ray's reprojected point was in the
       previous frame, (dx, dy) with +y down, jitter excluded: ``prev[y + dy, x + dx]``
-      backward-warps. Zero when no previous camera was given;
+      backward-warps. Zero when no previous camera was given. The point reprojected is the one
+      ``RayCaster.motion_depth`` chooses (where the opacity reaches 0.5, by default);
+    - ``motion_depth`` (H, W): quasi-depth (as ``depth``) of that point; 1 for background;
     - ``jitter``: the sub-pixel offset (pixels, +y down) every ray was shifted by.
     """
 
@@ -73,12 +75,17 @@ class FeatureFrame:
     def motion(self) -> np.ndarray:
         return self.data[..., OUT_MOTION:OUT_MOTION + 2]
 
+    @property
+    def motion_depth(self) -> np.ndarray:
+        return self.data[..., OUT_MOTION_DEPTH]
+
     def to_uint8(self) -> np.ndarray:
         """The colour as an (H, W, 3) uint8 image, ready for PNG."""
         return to_uint8(self.color)
 
     def save_npz(self, path: str | os.PathLike) -> None:
         """Write every buffer to a compressed .npz, atomically (temporary name, then rename)."""
-        arrays = {name: getattr(self, name) for name in ("color", "alpha", "depth", "max_rgba", "position", "motion")}
+        arrays = {name: getattr(self, name) for name in ("color", "alpha", "depth", "max_rgba", "position", "motion",
+                                                         "motion_depth")}
         with atomic_write(path) as fh:
             np.savez_compressed(fh, jitter=np.asarray(self.jitter, dtype=np.float32), **arrays)

@@ -36,11 +36,14 @@ P_GLUT_INV_DX = 10   # gradient-opacity LUT entries per (value unit / mm)
 P_BG_R = 11          # background colour
 P_BG_G = 12
 P_BG_B = 13
-P_START_JITTER = 14  # 1.0: offset each ray's first sample by a hashed fraction of the step
+P_START_JITTER = 14  # offset each ray's first sample by a fraction of the step: 1.0 hashed white noise, 2.0
+                     # interleaved gradient noise; both change with P_SEED (one per frame)
 P_SEED = 15          # integer seed for the start-jitter hash
 P_BLOCK = 16         # empty-space-skipping block edge, voxels
 P_HAS_PREV = 17      # 1.0 when prev_vp holds a previous camera
-P_SIZE = 18
+P_DEPTH_MODE = 18    # the point motion vectors reproject: 0 max alpha, 1 opacity threshold, 2 opacity-weighted mean
+P_DEPTH_THRESHOLD = 19  # accumulated opacity mode 1 looks for (max alpha where it is never reached)
+P_SIZE = 20
 
 # out: float32[H, W, OUT_CHANNELS], one pass's feature buffers -----------------------------------
 OUT_COLOR = 0        # 3: RGB composited over the background
@@ -49,4 +52,5 @@ OUT_DEPTH = 4        # 1: quasi-depth in [0, 1] at the sample of maximum alpha (
 OUT_MAX_RGBA = 5     # 4: shaded RGB and alpha of the sample of maximum alpha (0 for background)
 OUT_POSITION = 9     # 3: world position (mm) of that sample (focal-plane point for background)
 OUT_MOTION = 12      # 2: motion vector (pixels) to the previous frame
-OUT_CHANNELS = 14
+OUT_MOTION_DEPTH = 14  # 1: quasi-depth of the point the motion vector reprojects (P_DEPTH_MODE; 1 = background)
+OUT_CHANNELS = 15

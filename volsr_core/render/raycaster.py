@@ -14,6 +14,8 @@ from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 
 DEVICES = ("cpu", "cuda")
+MOTION_DEPTHS = ("max_alpha", "threshold", "mean")  # P_DEPTH_MODE 0, 1, 2
+START_JITTERS = {False: 0.0, True: 1.0, "hash": 1.0, "ign": 2.0}  # P_START_JITTER
 
 
 class RayCaster:
@@ -27,14 +29,27 @@ class RayCaster:
     to back until the accumulated alpha reaches ``early_termination``. Bricks of ``block_size``
     voxels that the transfer function makes fully transparent are skipped.
 
+    ``start_jitter`` offsets each ray's first sample by a fraction of the step, per pixel and per
+    ``seed`` (give each frame, or each sample of a supersampled pixel, its own): ``True``/``"hash"``
+    a hashed white-noise fraction, ``"ign"`` interleaved gradient noise (Jimenez 2014) shifted per
+    seed. It turns the rings of a fixed ray start ("wood grain") into noise that averaging removes.
+
+    Motion vectors reproject one point per ray, chosen by ``motion_depth`` (docs/temporal.md):
+    ``"threshold"`` (default) where the accumulated opacity first reaches ``depth_threshold`` (the
+    sample of maximum alpha where it never does), ``"max_alpha"`` the sample of maximum alpha (the
+    seed paper's choice; it is also always the ``depth`` and ``position`` features), ``"mean"`` the
+    opacity-weighted mean of the composited samples' distances. That point's quasi-depth is the
+    ``motion_depth`` buffer.
+
     ``device="cuda"`` runs the same ray program through numba-cuda (or its simulator).
     """
 
     def __init__(self, volume: Volume, transfer_function: TransferFunction, *,
                  sample_distance: float | None = None, early_termination: float = 0.99,
                  empty_space_skipping: bool = True, block_size: int = 8,
-                 background: Sequence[float] = (0.0, 0.0, 0.0), start_jitter: bool = False,
-                 device: str = "cpu", lut_size: int = 4096):
+                 background: Sequence[float] = (0.0, 0.0, 0.0), start_jitter: bool | str = False,
+                 device: str = "cpu", lut_size: int = 4096, motion_depth: str = "threshold",
+                 depth_threshold: float = 0.5):
         if device not in DEVICES:
             raise ValueError(f"device must be one of {DEVICES}, got {device!r}")
         if not 0.0 < early_termination <= 1.0:
@@ -47,7 +62,14 @@ class RayCaster:
         self.empty_space_skipping = bool(empty_space_skipping)
         self.block_size = int(block_size)
         self.background = tuple(float(c) for c in background)
-        self.start_jitter = bool(start_jitter)
+        if start_jitter not in START_JITTERS:
+            raise ValueError(f"start_jitter must be False, True, 'hash' or 'ign', got {start_jitter!r}")
+        self.start_jitter = start_jitter
+        if motion_depth not in MOTION_DEPTHS:
+            raise ValueError(f"motion_depth must be one of {MOTION_DEPTHS}, got {motion_depth!r}")
+        if not 0.0 < depth_threshold <= 1.0:
+            raise ValueError(f"depth_threshold must lie in (0, 1], got {depth_threshold}")
+        self.motion_depth, self.depth_threshold = motion_depth, float(depth_threshold)
         self.device = device
         self.lut_size = int(lut_size)
         self._block_lo, self._block_hi = block_min_max(volume.array, self.block_size)
@@ -78,6 +100,21 @@ class RayCaster:
         else:
             self._empty = np.zeros(self._block_lo.shape, dtype=np.uint8)
 
+    def visible_bounds(self) -> tuple[float, float, float, float, float, float]:
+        """Axis-aligned world bounds (mm, LPS; as :attr:`Volume.bounds`) of what the transfer function
+        shows: the bricks empty-space skipping does not skip, clipped to the volume's box; the whole
+        box when everything is transparent. Framing these fills the view with the visible volume."""
+        nonempty = np.argwhere(empty_blocks(self._block_lo, self._block_hi, self.tables) == 0)
+        if len(nonempty) == 0:
+            return self.volume.bounds
+        nx, ny, nz = self.volume.shape_xyz
+        lo = np.minimum(nonempty.min(axis=0)[::-1] * self.block_size, [nx - 1, ny - 1, nz - 1])  # (i, j, k)
+        hi = np.minimum((nonempty.max(axis=0)[::-1] + 1) * self.block_size, [nx - 1, ny - 1, nz - 1])
+        corners = np.array([[i, j, k, 1.0] for i in (lo[0], hi[0]) for j in (lo[1], hi[1]) for k in (lo[2], hi[2])])
+        world = (corners @ self.volume.index_to_world.T)[:, :3]
+        a, b = world.min(axis=0), world.max(axis=0)
+        return (a[0], b[0], a[1], b[1], a[2], b[2])
+
     def _params(self, seed: int, has_prev: bool) -> np.ndarray:
         tf, t = self._tf, self.tables
         p = np.zeros(L.P_SIZE)
@@ -90,10 +127,12 @@ class RayCaster:
         p[L.P_LUT_X0], p[L.P_LUT_INV_DX] = t.x0, t.inv_dx
         p[L.P_GLUT_INV_DX] = t.gradient_inv_dx
         p[L.P_BG_R:L.P_BG_B + 1] = self.background
-        p[L.P_START_JITTER] = float(self.start_jitter)
+        p[L.P_START_JITTER] = START_JITTERS[self.start_jitter]
         p[L.P_SEED] = float(seed % 2**31)
         p[L.P_BLOCK] = float(self.block_size)
         p[L.P_HAS_PREV] = float(has_prev)
+        p[L.P_DEPTH_MODE] = float(MOTION_DEPTHS.index(self.motion_depth))
+        p[L.P_DEPTH_THRESHOLD] = self.depth_threshold
         return p
 
     def _camera_array(self, camera: Camera, width: int, height: int, jitter: tuple[float, float]) -> np.ndarray:
@@ -121,7 +160,7 @@ class RayCaster:
 
         ``jitter`` shifts every ray by (jx, jy) pixels (+y down), e.g. a Halton offset in
         [-0.5, 0.5); ``previous_camera`` enables motion vectors; ``seed`` drives the per-ray
-        start jitter when it is on; ``out`` may pass a float32 (H, W, 14) array to reuse.
+        start jitter when it is on; ``out`` may pass a float32 (H, W, OUT_CHANNELS) array to reuse.
         """
         height = width if height is None else height
         if width < 1 or height < 1:

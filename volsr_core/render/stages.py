@@ -28,9 +28,13 @@ and for a visible sample (alpha > 0):
 - ``shade``: gradient opacity and Blinn-Phong headlight, each when on;
 - ``track_max_alpha``: RGBA and ray parameter of the most opaque sample so far;
 - ``composite``: front to back;
+- ``track_motion_point``: where the accumulated opacity crosses the depth threshold, and the
+  opacity-weighted sum of the samples' depths;
 - ``terminated``: early ray termination;
 
-and last ``finish``: background, features at the sample of maximum alpha, quasi-depth, motion vector.
+and last ``motion_point`` (the point motion vectors reproject: max alpha, opacity threshold or
+opacity-weighted mean) and ``finish``: background, features at the sample of maximum alpha,
+quasi-depths, motion vector.
 
 On the CPU numba inlines every stage (``inline="always"``), and each inlined call that takes an
 array holds its own reference to it. Stages therefore read their arrays before they branch: numba
@@ -51,9 +55,9 @@ from typing import Callable
 from volsr_core.render.layout import (
     CAM_DEPTH_LO, CAM_DEPTH_SPAN, CAM_FAR, CAM_FOCAL_DEPTH, CAM_FWD, CAM_HALF_H, CAM_HALF_W, CAM_JITTER_X,
     CAM_JITTER_Y, CAM_NEAR, CAM_PARALLEL, CAM_POS, CAM_RIGHT, CAM_UP, OUT_ALPHA, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA,
-    OUT_MOTION, OUT_POSITION, P_AMBIENT, P_BG_B, P_BG_G, P_BG_R, P_BLOCK, P_DIFFUSE, P_ERT, P_GLUT_INV_DX,
-    P_GRAD_OPACITY, P_HAS_PREV, P_LUT_INV_DX, P_LUT_X0, P_SEED, P_SHADE, P_SPEC_POWER, P_SPECULAR, P_START_JITTER,
-    P_STEP,
+    OUT_MOTION, OUT_MOTION_DEPTH, OUT_POSITION, P_AMBIENT, P_BG_B, P_BG_G, P_BG_R, P_BLOCK, P_DEPTH_MODE,
+    P_DEPTH_THRESHOLD, P_DIFFUSE, P_ERT, P_GLUT_INV_DX, P_GRAD_OPACITY, P_HAS_PREV, P_LUT_INV_DX, P_LUT_X0, P_SEED,
+    P_SHADE, P_SPEC_POWER, P_SPECULAR, P_START_JITTER, P_STEP,
 )
 
 
@@ -70,6 +74,15 @@ def build_ray_program(jit: Callable) -> Callable:
         h = ((h ^ (h >> 16)) * 0x45D9F3B) & 0xFFFFFFFF
         h = h ^ (h >> 16)
         return (h & 0xFFFFFF) / 16777216.0
+
+    @jit
+    def ign_unit(x, y, seed):
+        """Interleaved gradient noise (Jimenez 2014) in [0, 1) at pixel (x, y), shifted per frame (``seed``):
+        neighbouring pixels get well-spread offsets, so a temporal filter averages them quickly."""
+        shift = 5.588238 * (seed % 64)
+        f = 0.06711056 * (x + shift) + 0.00583715 * (y + shift)
+        f = 52.9829189 * (f - math.floor(f))
+        return f - math.floor(f)
 
     @jit
     def camera_ray(x, y, width, height, cam):
@@ -129,18 +142,21 @@ def build_ray_program(jit: Callable) -> Callable:
         """Stage: (t0, n_steps), the first sample's ray parameter and the number of samples.
 
         [t_near, t_far] is clipped to the volume box (voxel centres); with start jitter on, t0 moves
-        forward by a per-pixel fraction of a step. n_steps is 0 for a ray that misses the box.
+        forward by a per-pixel, per-seed fraction of a step (``P_START_JITTER`` 1: white-noise hash, 2:
+        interleaved gradient noise). n_steps is 0 for a ray that misses the box.
         """
         nz, ny, nx = vol.shape
         step = params[P_STEP]
-        start_jitter = params[P_START_JITTER] > 0.5
+        start_jitter = params[P_START_JITTER]
         seed = int(params[P_SEED])
         t0, t1 = clip_slab(oi, di, nx - 1.0, t_near, t_far)
         t0, t1 = clip_slab(oj, dj, ny - 1.0, t0, t1)
         t0, t1 = clip_slab(ok, dk, nz - 1.0, t0, t1)
         if t0 > t1:
             return t0, 0
-        if start_jitter:
+        if start_jitter > 1.5:
+            t0 += step * ign_unit(x, y, seed)
+        elif start_jitter > 0.5:
             t0 += step * hash_unit(x, y, seed)
         return t0, int(math.floor((t1 - t0) / step)) + 1
 
@@ -287,14 +303,44 @@ def build_ray_program(jit: Callable) -> Callable:
         return cr + w * r, cg + w * g, cb + w * b, ca + w
 
     @jit
+    def track_motion_point(t, ca_before, ca, t_cross, sum_w, sum_wt, threshold):
+        """Stage: (t_cross, sum_w, sum_wt): where the accumulated opacity first reached ``threshold``
+        (-1 until it does), and the sums of composited weights and weight * t (their mean depth)."""
+        w = ca - ca_before
+        if t_cross < 0.0 and ca >= threshold:
+            t_cross = t
+        return t_cross, sum_w + w, sum_wt + w * t
+
+    @jit
+    def motion_point(t_max, t_cross, sum_w, sum_wt, params):
+        """Stage: the ray parameter of the point motion vectors reproject (``P_DEPTH_MODE``): 0 the sample of
+        maximum alpha, 1 where the accumulated opacity reached ``P_DEPTH_THRESHOLD`` (max alpha where it
+        never did), 2 the opacity-weighted mean of the composited samples (max alpha where none was)."""
+        mode = params[P_DEPTH_MODE]
+        if mode > 1.5 and sum_w > 0.0:
+            return sum_wt / sum_w
+        if mode > 0.5 and mode < 1.5 and t_cross >= 0.0:
+            return t_cross
+        return t_max
+
+    @jit
     def terminated(ca, params):
         """Stage: early ray termination, once the accumulated alpha reaches the threshold."""
         return ca >= params[P_ERT]
 
     # per ray, after the loop --------------------------------------------------------------------
     @jit
-    def finish(x, y, width, height, out, cr, cg, cb, ca, mr, mg, mb, ma, wx, wy, wz, cam, params, prev_vp):
-        """Stage: write colour over the background, max-alpha features and the motion vector for pixel (x, y)."""
+    def quasi_depth(wx, wy, wz, cam):
+        """View depth of world point w mapped to [0, 1] over the volume's bounding sphere (clamped)."""
+        z = ((wx - cam[CAM_POS]) * cam[CAM_FWD] + (wy - cam[CAM_POS + 1]) * cam[CAM_FWD + 1]
+             + (wz - cam[CAM_POS + 2]) * cam[CAM_FWD + 2])
+        return min(max((z - cam[CAM_DEPTH_LO]) / cam[CAM_DEPTH_SPAN], 0.0), 1.0)
+
+    @jit
+    def finish(x, y, width, height, out, cr, cg, cb, ca, mr, mg, mb, ma, wx, wy, wz, rx, ry, rz, cam, params,
+               prev_vp):
+        """Stage: write colour over the background, the max-alpha features (its world point w: ``position``,
+        ``depth``) and, for the point r the motion vector reprojects, ``motion_depth`` and the vector."""
         out[y, x, OUT_COLOR] = cr + (1.0 - ca) * params[P_BG_R]
         out[y, x, OUT_COLOR + 1] = cg + (1.0 - ca) * params[P_BG_G]
         out[y, x, OUT_COLOR + 2] = cb + (1.0 - ca) * params[P_BG_B]
@@ -307,17 +353,18 @@ def build_ray_program(jit: Callable) -> Callable:
         out[y, x, OUT_POSITION + 1] = wy
         out[y, x, OUT_POSITION + 2] = wz
         depth = 1.0
+        motion_depth = 1.0
         if ma > 0.0:
-            z = ((wx - cam[CAM_POS]) * cam[CAM_FWD] + (wy - cam[CAM_POS + 1]) * cam[CAM_FWD + 1]
-                 + (wz - cam[CAM_POS + 2]) * cam[CAM_FWD + 2])
-            depth = min(max((z - cam[CAM_DEPTH_LO]) / cam[CAM_DEPTH_SPAN], 0.0), 1.0)
+            depth = quasi_depth(wx, wy, wz, cam)
+            motion_depth = quasi_depth(rx, ry, rz, cam)
         out[y, x, OUT_DEPTH] = depth
+        out[y, x, OUT_MOTION_DEPTH] = motion_depth
         mx = 0.0
         my = 0.0
         if params[P_HAS_PREV] > 0.5:
-            cx = prev_vp[0, 0] * wx + prev_vp[0, 1] * wy + prev_vp[0, 2] * wz + prev_vp[0, 3]
-            cy = prev_vp[1, 0] * wx + prev_vp[1, 1] * wy + prev_vp[1, 2] * wz + prev_vp[1, 3]
-            cw = prev_vp[3, 0] * wx + prev_vp[3, 1] * wy + prev_vp[3, 2] * wz + prev_vp[3, 3]
+            cx = prev_vp[0, 0] * rx + prev_vp[0, 1] * ry + prev_vp[0, 2] * rz + prev_vp[0, 3]
+            cy = prev_vp[1, 0] * rx + prev_vp[1, 1] * ry + prev_vp[1, 2] * rz + prev_vp[1, 3]
+            cw = prev_vp[3, 0] * rx + prev_vp[3, 1] * ry + prev_vp[3, 2] * rz + prev_vp[3, 3]
             if cw > 1e-12:
                 prev_px = (cx / cw + 1.0) * 0.5 * width
                 prev_py = (1.0 - cy / cw) * 0.5 * height
@@ -339,6 +386,8 @@ def build_ray_program(jit: Callable) -> Callable:
         cr, cg, cb, ca = 0.0, 0.0, 0.0, 0.0  # accumulated colour, premultiplied
         mr, mg, mb, ma = 0.0, 0.0, 0.0, 0.0  # sample of maximum alpha ...
         t_max = t_focal  # ... at t_max; the focal plane when no sample is visible
+        threshold = params[P_DEPTH_THRESHOLD]
+        t_cross, sum_w, sum_wt = -1.0, 0.0, 0.0  # for the point motion vectors reproject
         k = 0
         while k < n_steps:
             t = t0 + k * step
@@ -354,11 +403,15 @@ def build_ray_program(jit: Callable) -> Callable:
                     gx, gy, gz = gradient(vol, px, py, pz, grad_w)
                     r, g, b, a = shade(r, g, b, a, gx, gy, gz, dx, dy, dz, glut, params)
                 mr, mg, mb, ma, t_max = track_max_alpha(r, g, b, a, t, mr, mg, mb, ma, t_max)
+                ca_before = ca
                 cr, cg, cb, ca = composite(r, g, b, a, cr, cg, cb, ca)
+                t_cross, sum_w, sum_wt = track_motion_point(t, ca_before, ca, t_cross, sum_w, sum_wt, threshold)
                 if terminated(ca, params):
                     break
             k += 1
+        t_motion = motion_point(t_max, t_cross, sum_w, sum_wt, params)
         finish(x, y, width, height, out, cr, cg, cb, ca, mr, mg, mb, ma,
-               ox + t_max * dx, oy + t_max * dy, oz + t_max * dz, cam, params, prev_vp)
+               ox + t_max * dx, oy + t_max * dy, oz + t_max * dz,
+               ox + t_motion * dx, oy + t_motion * dy, oz + t_motion * dz, cam, params, prev_vp)
 
     return march_ray

@@ -31,7 +31,8 @@ from volsr_core.scene.camera import Camera
 from volsr_core.sr.history import taau_upsampler
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
 from volsr_core.temporal.supersample import render_supersampled
-from volsr_core.temporal.taau import resize_bicubic, resize_bilinear
+from volsr_core.temporal.resample import resize_bicubic, resize_bilinear
+from volsr_core.temporal.taau import view_rotation
 
 INTERPOLATIONS = ("bilinear", "bicubic")
 
@@ -89,6 +90,7 @@ class Native(Method):
     def __init__(self, caster: RayCaster, size: tuple[int, int], spp: int = 1):
         super().__init__(size)
         self.caster, self.spp = caster, int(spp)
+        self.frame = 0
 
     @property
     def label(self) -> str:
@@ -96,7 +98,8 @@ class Native(Method):
 
     def __call__(self, camera: Camera) -> MethodFrame:
         started = time.perf_counter()
-        image = render_supersampled(self.caster, camera, *self.size, spp=self.spp)
+        image = render_supersampled(self.caster, camera, *self.size, spp=self.spp, seed=self.frame * self.spp)
+        self.frame += 1
         return MethodFrame(image, _elapsed_ms(started))
 
 
@@ -109,6 +112,7 @@ class ReducedSize(Method):
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
         self.caster, self.scale, self.kind = caster, int(factor), interpolation
+        self.frame = 0
 
     @property
     def label(self) -> str:
@@ -128,9 +132,10 @@ class ReducedSize(Method):
 
     def __call__(self, camera: Camera) -> MethodFrame:
         started = time.perf_counter()
-        lr = self.caster.render(camera, *self.low_resolution_size)
+        lr = self.caster.render(camera, *self.low_resolution_size, seed=self.frame)
         rendered = time.perf_counter()
         image = self.upscale(lr.color)
+        self.frame += 1
         return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered), lr)
 
 
@@ -155,18 +160,20 @@ class Taau(Method):
         self.upsampler.reset()
         self.previous = None
 
-    def upscale(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float]) -> np.ndarray:
-        """The accumulation stage alone: one jittered LR frame (colour, motion, jitter) in, (H, W, 3) out."""
-        return self.upsampler(colour, motion, jitter)
+    def upscale(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
+                depth: np.ndarray | None = None, rotation: float | None = None) -> np.ndarray:
+        """The accumulation stage alone: one jittered LR frame (colour, motion, jitter, the reprojected
+        point's depth, the view's rotation in degrees since the last frame) in, (H, W, 3) out."""
+        return self.upsampler(colour, motion, jitter, depth, rotation)
 
     def __call__(self, camera: Camera) -> MethodFrame:
         width, height = self.size
         jitter = halton_jitter(self.frame, jitter_phases(self.scale))
         started = time.perf_counter()
         lr = self.caster.render(camera, width // self.scale, height // self.scale, jitter=jitter,
-                                previous_camera=self.previous)
+                                previous_camera=self.previous, seed=self.frame)
         rendered = time.perf_counter()
-        image = self.upscale(lr.color, lr.motion, lr.jitter)
+        image = self.upscale(lr.color, lr.motion, lr.jitter, lr.motion_depth, view_rotation(camera, self.previous))
         self.frame += 1
         self.previous = camera
         return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered), lr)

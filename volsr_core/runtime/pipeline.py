@@ -55,7 +55,9 @@ class Pipeline:
         if self.engine.config.scale != scale:
             raise ValueError(f"the model upscales {self.engine.config.scale}x, not {scale}x")
         self.scale = int(scale)
-        self._caster_options = {"sample_distance": sample_distance, "device": device}
+        # ray starts jittered per pixel and frame (seeded by the frame number): the temporal history averages
+        # the offsets instead of keeping a fixed start's rings
+        self._caster_options = {"sample_distance": sample_distance, "device": device, "start_jitter": "ign"}
         self.caster = RayCaster(volume, transfer_function, background=tuple(float(c) for c in background),
                                 **self._caster_options)
         self.upscaler = StatefulUpscaler(self.engine, max_turn=max_turn, max_zoom=max_zoom)
@@ -118,7 +120,7 @@ class Pipeline:
         w, h = self.low_resolution_size
         jitter = halton_jitter(self.frame, jitter_phases(self.scale))
         started = time.perf_counter()
-        lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera)
+        lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame)
         rendered = time.perf_counter()
         image = self.upscaler.upscale(lr)[: self.size[1], : self.size[0]]
         done = time.perf_counter()

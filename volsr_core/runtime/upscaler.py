@@ -13,8 +13,7 @@ import numpy as np
 from volsr_core.render.features import FeatureFrame
 from volsr_core.scene.camera import Camera, rotation_between
 from volsr_core.sr.history import HistoryFeed
-
-BUFFERS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4}
+from volsr_core.temporal.taau import view_rotation
 
 
 def network_inputs(frame: FeatureFrame, features: tuple[str, ...]) -> np.ndarray:
@@ -121,7 +120,8 @@ class StatefulUpscaler:
         lr = np.stack([f[0] for f in held])[None]
         vectors = np.stack([f[1] for f in held])[None]
         jitters = np.stack([f[2] for f in held])[None]
-        history = self.history(frame.color, motion.transpose(1, 2, 0), tuple(jitter))  # (H, W, 3) or None
+        history = self.history(frame.color, motion.transpose(1, 2, 0), tuple(jitter), frame.motion_depth,
+                               view_rotation(frame.camera, frame.previous_camera))  # (H, W, 3) or None
         if history is not None:
             history = np.ascontiguousarray(history.transpose(2, 0, 1)[None])
         out = self.engine(lr, vectors, jitters, history)[0].transpose(1, 2, 0)

@@ -45,13 +45,34 @@ def orbit(start: Camera, n_frames: int, degrees: float = 360.0, elevation: float
     return [_turn(base, start.view_up, i * step) for i in range(n_frames)]
 
 
+def orbit_framing(bounds: Bounds, aspect: float = 1.0, view_angle: float = 30.0, fill: float = 0.9) -> Camera:
+    """The anterior view (as :meth:`Camera.framing`) of the box ``bounds`` at the distance where the box,
+    turning about the superior axis through its centre (a turntable orbit), fills ``fill`` of the view.
+
+    :meth:`Camera.framing` fits the box's bounding sphere, which leaves a tall or flat box small; here
+    the cylinder the turning box sweeps (radius: the box's half diagonal across the axis; half height:
+    its half extent along it) must fit, vertically and horizontally, seen in perspective from the
+    nearest point of the cylinder.
+    """
+    b = np.asarray(bounds, dtype=np.float64).reshape(3, 2)
+    radius = 0.5 * float(np.hypot(b[0, 1] - b[0, 0], b[1, 1] - b[1, 0]))
+    half_height = 0.5 * float(b[2, 1] - b[2, 0])
+    tan_v = math.tan(math.radians(view_angle) / 2.0) * fill
+    tan_h = math.tan(math.radians(view_angle) / 2.0) * aspect * fill
+    distance = max(radius + half_height / tan_v, radius * math.sqrt(1.0 + 1.0 / (tan_h * tan_h)))
+    start = Camera.framing(bounds, view_angle=view_angle, aspect=aspect)
+    return start.dolly(start.distance / distance).reset_clipping_range(bounds)
+
+
 def orbit_around(bounds: Bounds, n_frames: int, degrees_per_frame: float | None = None, elevation: float = 0.0,
-                 aspect: float = 1.0) -> list[Camera]:
-    """``n_frames`` cameras orbiting the volume in ``bounds`` from the anterior view that frames it
-    (:meth:`Camera.framing` at ``aspect``), ``degrees_per_frame`` apart (None: one full turn over the
-    frames), ``elevation`` degrees up, clipping ranges fitted to ``bounds``: the commands' ``--orbit``."""
+                 aspect: float = 1.0, fill: float | None = 0.9) -> list[Camera]:
+    """``n_frames`` cameras orbiting the box ``bounds`` (mm; the volume's, or what its transfer function
+    shows: ``RayCaster.visible_bounds``) from the anterior view that fills ``fill`` of the view with it
+    (:func:`orbit_framing`; None: VTK's ResetCamera framing of the bounding sphere,
+    :meth:`Camera.framing`), ``degrees_per_frame`` apart (None: one full turn over the frames),
+    ``elevation`` degrees up, clipping ranges fitted to ``bounds``: the commands' ``--orbit``."""
     degrees = 360.0 if degrees_per_frame is None else n_frames * degrees_per_frame
-    start = Camera.framing(bounds, aspect=aspect)
+    start = Camera.framing(bounds, aspect=aspect) if fill is None else orbit_framing(bounds, aspect=aspect, fill=fill)
     return [c.reset_clipping_range(bounds) for c in orbit(start, n_frames, degrees, elevation=elevation)]
 
 

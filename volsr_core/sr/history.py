@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from volsr_core.temporal.taau import TemporalUpsampler, upscale_bilinear
+from volsr_core.temporal.resample import upscale_bilinear
+from volsr_core.temporal.taau import TemporalUpsampler
 
 HISTORY_MODES = ("none", "recurrent", "taau")
 
@@ -54,9 +55,10 @@ def stand_in_history(lr: np.ndarray, scale: int) -> np.ndarray:
 class HistoryFeed:
     """:func:`pick_history` over a stream of frames, one call per frame, numpy (H, W, 3) images.
 
-    ``feed(colour, motion, jitter)`` returns this frame's history (or None) and must see every
-    frame from the cut on (TAAU accumulates over all of them); ``feed.keep(output)`` hands it the
-    network's output for that frame (a recurrent network's next history). :meth:`reset` is a cut.
+    ``feed(colour, motion, jitter, depth, rotation)`` returns this frame's history (or None) and must
+    see every frame from the cut on (TAAU accumulates over all of them; ``depth`` and ``rotation`` as
+    :class:`~volsr_core.temporal.taau.TemporalUpsampler` takes them); ``feed.keep(output)`` hands it
+    the network's output for that frame (a recurrent network's next history). :meth:`reset` is a cut.
     """
 
     def __init__(self, config: Any):
@@ -69,8 +71,9 @@ class HistoryFeed:
         if self.taau is not None:
             self.taau.reset()
 
-    def __call__(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float]) -> np.ndarray | None:
-        estimate = self.taau(colour, motion, jitter) if self.taau is not None else None
+    def __call__(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
+                 depth: np.ndarray | None = None, rotation: float | None = None) -> np.ndarray | None:
+        estimate = self.taau(colour, motion, jitter, depth, rotation) if self.taau is not None else None
         return pick_history(self.mode, self.previous, estimate)
 
     def keep(self, output: np.ndarray) -> None:

@@ -11,7 +11,7 @@ import torch
 from torch.utils.data import Dataset
 
 from volsr_core.errors import InputError
-from volsr_core.dataset.store import LR_BUFFERS, MANIFEST_FORMAT, read_json
+from volsr_core.dataset.store import LR_BUFFERS, MANIFEST_FORMAT, read_json, view_rotations
 from volsr_core.sr.history import taau_upsampler
 
 FEATURE_CHANNELS = {name: channels or 1 for name, channels in LR_BUFFERS.items()}
@@ -34,9 +34,10 @@ class SequenceDataset(Dataset):
       ground truth, for unrolling a recurrent network over T frames (``previous_frames`` must
       then count the N frames each step sees plus T - 1);
     - ``taau`` (T, 3, P, P), only with ``taau=True``: the TAAU estimates of the ``hr_frames``
-      frames t, t-1, ... (:func:`~volsr_core.sr.history.taau_upsampler` run over the video
-      from frame 0 on the LR colour, motion and jitter; computed for every video when the
-      dataset is made, so that forked loader workers inherit it);
+      frames t, t-1, ... (:func:`~volsr_core.sr.history.taau_upsampler` run over the video from frame 0
+      on the LR colour, motion, jitter, motion depth (a version-1 store: the max-alpha depth) and the
+      view rotations of its cameras; computed for every video when the dataset is made, so that
+      forked loader workers inherit it);
     - ``video``, ``frame``: int64 scalars, the video's number and t (for debugging).
 
     Crops are aligned across scales: an LR origin (x0, y0) in LR pixels is drawn, and the HR crop
@@ -165,8 +166,10 @@ class SequenceDataset(Dataset):
         if video_index not in self._taau:
             h5, s = self._file(video_index), self.scale
             colour, motion, jitter = (h5[f"lr{s}/{k}"][()].astype(np.float32) for k in ("color", "motion", "jitter"))
+            depth = h5[f"lr{s}/motion_depth" if f"lr{s}/motion_depth" in h5 else f"lr{s}/depth"][()].astype(np.float32)
+            rotation = view_rotations(h5["cameras"][()])
             upsampler = taau_upsampler(s)
-            self._taau[video_index] = np.stack([upsampler(colour[t], motion[t], tuple(jitter[t]))
+            self._taau[video_index] = np.stack([upsampler(colour[t], motion[t], tuple(jitter[t]), depth[t], rotation[t])
                                                 for t in range(len(colour))])
         return self._taau[video_index]
 

@@ -10,7 +10,7 @@ from typing import Any
 
 from volsr_core.config_reader import Source, read_dataclass
 
-FEATURE_CHANNELS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4}
+FEATURE_CHANNELS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4, "motion_depth": 1}
 SCALES = (2, 4, 8, 16)
 
 

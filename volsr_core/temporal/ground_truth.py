@@ -27,9 +27,9 @@ def ground_truth_frames(caster: RayCaster, cameras: Sequence[Camera], width: int
                         mode: str = "supersampled", spp: int = 16, warmup: int = 16,
                         history_weight: float = 0.9) -> Iterator[np.ndarray]:
     """Yield one (H, W, 3) float32 ground-truth colour image per camera, in order."""
-    if mode == "supersampled":
-        for camera in cameras:
-            yield render_supersampled(caster, camera, width, height, spp=spp)
+    if mode == "supersampled":  # ray-start seeds apart from the LR frames' (which count frames from 0)
+        for t, camera in enumerate(cameras):
+            yield render_supersampled(caster, camera, width, height, spp=spp, seed=10**6 + t * spp)
         return
     if mode != "taa":
         raise ValueError(f"ground-truth mode must be one of {MODES}, got {mode!r}")

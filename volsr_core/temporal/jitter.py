@@ -36,3 +36,9 @@ def jitter_sequence(n: int, phases: int | None = None) -> np.ndarray:
     """(n, 2) float32 array of :func:`halton_jitter` offsets for frames 0..n-1 (phases default n)."""
     phases = n if phases is None else phases
     return np.array([halton_jitter(f, phases) for f in range(n)], dtype=np.float32)
+
+
+def sample_offset(jitter: float, scale: int) -> int:
+    """Index (0..scale-1) of the HR pixel, inside its LR pixel's block of ``scale`` HR pixels, that a
+    sample jittered by ``jitter`` LR pixels lands in (the network's zero-upsampling slot)."""
+    return min(max(int(math.floor((0.5 + jitter) * scale)), 0), scale - 1)

@@ -153,8 +153,9 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
 
     width, height = size
     truth = []
-    for camera in cameras:
-        truth.append(render_supersampled(caster, camera, width, height, spp=reference_spp))
+    for t, camera in enumerate(cameras):  # ray-start seeds apart from the methods' (which count frames from 0)
+        truth.append(render_supersampled(caster, camera, width, height, spp=reference_spp,
+                                         seed=10**6 + t * reference_spp))
         if progress is not None:
             progress.update()
     records = [{"render": [], "network": [], "psnr": [], "ssim": []} for _ in methods]
@@ -222,9 +223,9 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
     with tqdm(total=len(volumes_) * frames * (1 + n_methods), desc="bench", unit="render", disable=not progress) as bar:
         for bench_volume in volumes_:
             bar.set_postfix_str(bench_volume.name)
-            caster = RayCaster(bench_volume.volume, bench_volume.transfer_function, device=device)
+            caster = RayCaster(bench_volume.volume, bench_volume.transfer_function, device=device, start_jitter="ign")
             methods = build_methods(bench_volume, caster, size, spp, factors, scales, models, threads, device)
-            cameras = orbit_around(bench_volume.volume.bounds, frames, degrees)
+            cameras = orbit_around(caster.visible_bounds(), frames, degrees, aspect=size[0] / size[1])
             rows += bench_one(bench_volume, caster, size, methods, cameras, reference_spp, warmup, bar)
 
     settings = {"size": list(size), "frames": frames, "degrees_per_frame": degrees, "warmup": warmup,
