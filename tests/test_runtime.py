@@ -151,6 +151,28 @@ def test_a_taau_based_upscaler_runs_taau_and_starts_as_it():
         assert np.allclose(upscaler.upscale(frame), np.clip(expected, 0, 1), atol=1e-5)
 
 
+def test_a_network_with_taau_side_outputs_takes_seven_history_channels_and_starts_as_taau(tmp_path):
+    from volsr_core.sr.history import HistoryFeed
+    from volsr_core.temporal.taau import TemporalUpsampler
+
+    config = variant_config("S", 4, 0, taau_base=True, taau_aux=True)
+    assert config.history_channels == 7
+    net = SuperResolutionNet(config)  # zero residual: the output is TAAU's
+    engine = OnnxEngine(export_onnx(net, tmp_path / "aux.onnx"), providers=["CPUExecutionProvider"])
+    upscaler, taau, feed = StatefulUpscaler(engine), TemporalUpsampler(4), HistoryFeed(config)
+    rng = np.random.default_rng(3)
+    for k in range(3):
+        frame = feature_frame(rng, jitter=(0.2 * k - 0.3, 0.1), motion=0.0 if k == 0 else 0.4)
+        motion = np.asarray(frame.motion) * (k > 0)
+        history = feed(frame.color, motion, frame.jitter, frame.motion_depth, 0.0)
+        expected = taau(frame.color, motion, frame.jitter, frame.motion_depth, 0.0)
+        assert history.shape == (24, 20, 7) and np.array_equal(history[..., :3], expected)
+        np.testing.assert_array_equal(history[..., 3:], taau.last_aux)
+        assert np.allclose(upscaler.upscale(frame), np.clip(expected, 0, 1), atol=1e-5)
+    with pytest.raises(ValueError, match="taau_aux"):
+        variant_config("S", 4, 0, taau_aux=True)
+
+
 def test_pipeline_update_is_the_one_sync_point_idempotent_with_reasons(tmp_path):
     from volsr_core.io import make_phantom
     from volsr_core.runtime.pipeline import Pipeline

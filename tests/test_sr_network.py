@@ -200,7 +200,7 @@ def test_a_network_config_reads_back_from_its_dict_and_refuses_unknown_keys():
     assert NetworkConfig.from_dict({"scale": 2, "fold": 2}) == NetworkConfig(scale=2, fold=2)  # defaults filled
     with pytest.raises(InputError, match=r"^m.pt: network.colour: unknown key \(allowed: scale, previous_frames, "
                                          r"features, fold, widths, reweight_width, feature_width, recurrent, "
-                                         r"taau_base\)$"):
+                                         r"taau_base, taau_aux\)$"):
         NetworkConfig.from_dict({**config.to_dict(), "colour": True}, source="m.pt", key="network")
     with pytest.raises(InputError, match=r"^m.pt: network.widths\[0\]: expected an integer, got str '8'$"):
         NetworkConfig.from_dict({"widths": ["8"]}, source="m.pt", key="network")
@@ -235,4 +235,4 @@ def test_onnx_metadata_with_an_unknown_key_is_a_one_line_error(tmp_path):
     with pytest.raises(InputError) as caught:
         OnnxEngine(path, providers=["CPUExecutionProvider"])
     assert str(caught.value) == (f"{path}: volsr.network.colour: unknown key (allowed: scale, previous_frames, "
-                                 "features, fold, widths, reweight_width, feature_width, recurrent, taau_base)")
+                                 "features, fold, widths, reweight_width, feature_width, recurrent, taau_base, taau_aux)")

@@ -191,3 +191,23 @@ def test_one_halton_cycle_puts_samples_on_every_hr_pixel(scale):
 
 def test_jitter_phases_follow_fsr2():
     assert [jitter_phases(s) for s in (1, 2, 3, 4)] == [8, 32, 72, 128]
+
+
+def test_the_side_outputs_hold_the_reprojected_history_and_its_share_of_the_blend():
+    scale, n = 2, 10
+    rng = np.random.default_rng(8)
+    up = TemporalUpsampler(scale)
+    still = np.zeros((n, n, 2), dtype=np.float32)
+    first = rng.random((n, n, 3), dtype=np.float32)
+    up(first, still, (0.0, 0.0), rotation=0.0)
+    assert np.all(up.last_aux == 0.0), "no history on the first frame: no colour, no share"
+    history = up.history[..., :3].copy()
+    second = np.full((n, n, 3), 0.4, dtype=np.float32)  # constant: the current estimate is 0.4 everywhere
+    out = up(second, still, (0.25, -0.25), rotation=0.0)
+    share = up.last_aux[..., 3]
+    assert np.all((share > 0.0) & (share < 1.0))
+    # the still camera: the history is read in place (Catmull-Rom at integer positions = the pixel itself),
+    # no clamp when nothing moves
+    np.testing.assert_allclose(up.last_aux[..., :3], history, atol=1e-5)
+    # the output is the blend of the two by that share
+    np.testing.assert_allclose(out, share[..., None] * history + (1.0 - share[..., None]) * 0.4, atol=1e-5)

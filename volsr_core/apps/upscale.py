@@ -125,7 +125,8 @@ def network_ms(engine, low_resolution_size: tuple[int, int], repeats: int = 3) -
     lr = np.zeros((1, frames, config.in_channels, h, w), np.float32)
     motion = np.zeros((1, frames, 2, h, w), np.float32)
     jitter = np.zeros((1, frames, 2), np.float32)
-    history = np.zeros((1, 3, h * config.scale, w * config.scale), np.float32) if config.takes_history else None
+    history = (np.zeros((1, config.history_channels, h * config.scale, w * config.scale), np.float32)
+               if config.takes_history else None)
     engine(lr, motion, jitter, history)
     times = []
     for _ in range(repeats):

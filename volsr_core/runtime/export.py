@@ -1,7 +1,7 @@
 """ONNX export of a :class:`~volsr_core.sr.network.SuperResolutionNet`, dynamic in batch, height and width.
 
 The graph's inputs are the network's: ``lr`` (B, N+1, C, h, w), ``motion`` (B, N+1, 2, h, w),
-``jitter`` (B, N+1, 2) and, for networks that take one, ``history`` (B, 3, H, W); its output ``hr``
+``jitter`` (B, N+1, 2) and, for networks that take one, ``history`` (B, history_channels, H, W); its output ``hr``
 (B, 3, H, W), H = h * scale. The network's configuration rides in the model's metadata
 (``volsr.network``, JSON) so a session knows the scale, frames and features without PyTorch.
 """
@@ -34,7 +34,7 @@ def example_inputs(config: NetworkConfig, height: int, width: int, batch: int = 
               torch.randn(batch, frames, 2, height, width, generator=g),
               torch.rand(batch, frames, 2, generator=g) - 0.5)
     if config.takes_history:
-        inputs += (torch.rand(batch, 3, height * config.scale, width * config.scale, generator=g),)
+        inputs += (torch.rand(batch, config.history_channels, height * config.scale, width * config.scale, generator=g),)
     return inputs
 
 

@@ -39,6 +39,7 @@ class ModelSection:
     widths: tuple[int, ...] | None = None
     recurrent: bool = False
     taau_base: bool = False
+    taau_aux: bool = False
     init: str | None = None
 
 

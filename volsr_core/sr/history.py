@@ -6,7 +6,8 @@ A network (:class:`~volsr_core.sr.network_config.NetworkConfig`) takes one of th
 - ``"recurrent"``: its own output for the previous frame (the network warps it to this frame);
   none on the first frame after a cut;
 - ``"taau"``: TAAU's estimate of *this* frame (:func:`taau_upsampler`, run over every frame from
-  the cut on), which the network refines.
+  the cut on), which the network refines; for a network with ``taau_aux`` followed by TAAU's side
+  outputs (the reprojected history and its share of the blend: 7 channels).
 
 :func:`pick_history` is the rule; :class:`HistoryFeed` applies it to a stream of frames (numpy,
 as the runtime and ``volsr eval`` run networks); training applies it to batches
@@ -64,6 +65,7 @@ class HistoryFeed:
     def __init__(self, config: Any):
         self.mode = history_mode(config)
         self.taau = taau_upsampler(config.scale) if self.mode == "taau" else None
+        self.taau_aux = bool(getattr(config, "taau_aux", False))
         self.previous: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -73,7 +75,11 @@ class HistoryFeed:
 
     def __call__(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
                  depth: np.ndarray | None = None, rotation: float | None = None) -> np.ndarray | None:
-        estimate = self.taau(colour, motion, jitter, depth, rotation) if self.taau is not None else None
+        estimate = None
+        if self.taau is not None:
+            estimate = self.taau(colour, motion, jitter, depth, rotation)
+            if self.taau_aux:  # (H, W, 7): the estimate, then what its blend threw away
+                estimate = np.concatenate([estimate, self.taau.last_aux], axis=-1)
         return pick_history(self.mode, self.previous, estimate)
 
     def keep(self, output: np.ndarray) -> None:

@@ -12,7 +12,7 @@ from torch.utils.data import Dataset
 
 from volsr_core.errors import InputError
 from volsr_core.dataset.store import LR_BUFFERS, MANIFEST_FORMAT, read_json, view_rotations
-from volsr_core.sr.history import taau_upsampler
+from volsr_core.sr.history import HistoryFeed
 
 FEATURE_CHANNELS = {name: channels or 1 for name, channels in LR_BUFFERS.items()}
 SPLITS = ("train", "val", "test")
@@ -33,8 +33,9 @@ class SequenceDataset(Dataset):
     - ``hr_sequence`` (T, 3, P, P), only when ``hr_frames`` T > 1: frames t, t-1, ..., t-T+1's
       ground truth, for unrolling a recurrent network over T frames (``previous_frames`` must
       then count the N frames each step sees plus T - 1);
-    - ``taau`` (T, 3, P, P), only with ``taau=True``: the TAAU estimates of the ``hr_frames``
-      frames t, t-1, ... (:func:`~volsr_core.sr.history.taau_upsampler` run over the video from frame 0
+    - ``taau`` (T, C, P, P), only with ``taau`` (the NetworkConfig of a TAAU-based network): the
+      history it takes (C = its ``history_channels``) for the ``hr_frames`` frames t, t-1, ...
+      (:class:`~volsr_core.sr.history.HistoryFeed` run over the video from frame 0
       on the LR colour, motion, jitter, motion depth (a version-1 store: the max-alpha depth) and the
       view rotations of its cameras; computed for every video when the dataset is made, so that
       forked loader workers inherit it);
@@ -58,7 +59,7 @@ class SequenceDataset(Dataset):
 
     def __init__(self, root: str | os.PathLike, split: str = "train", scale: int = 4, previous_frames: int = 2,
                  crop: int | None = 128, features: Sequence[str] = ("color", "depth", "max_rgba"),
-                 augment: bool = True, seed: int | None = None, hr_frames: int = 1, taau: bool = False):
+                 augment: bool = True, seed: int | None = None, hr_frames: int = 1, taau: Any = None):
         self.root = Path(root)
         manifest = _read_manifest(self.root / "manifest.json")
         if split not in SPLITS:
@@ -73,7 +74,7 @@ class SequenceDataset(Dataset):
         if not 1 <= hr_frames <= previous_frames + 1:
             raise ValueError(f"hr_frames must be 1..previous_frames + 1, got {hr_frames}")
         self.hr_frames = int(hr_frames)
-        self.taau = bool(taau)
+        self.taau = taau
         self._taau: dict[int, np.ndarray] = {}
         self.split, self.scale, self.previous_frames = split, int(scale), int(previous_frames)
         self.crop, self.features, self.augment, self.seed = crop, tuple(features), bool(augment), seed
@@ -84,7 +85,7 @@ class SequenceDataset(Dataset):
         self.epoch = 0
         self._files: dict[int, h5py.File] = {}
         self._pid = os.getpid()
-        if self.taau:  # here, not in DataLoader workers: numba's thread pool deadlocks in a forked child
+        if self.taau is not None:  # here, not in DataLoader workers: numba's thread pool deadlocks in a forked child
             for video_index in range(len(self.videos)):
                 self._taau_frames(video_index)
 
@@ -147,7 +148,7 @@ class SequenceDataset(Dataset):
             jitter[:, 1] *= -1
         hr = _tensor(hr.transpose(0, 3, 1, 2))
         taau = None
-        if self.taau:
+        if self.taau is not None:
             taau = self._taau_frames(video_index)[t - self.hr_frames + 1:t + 1, s * y0:s * (y0 + ph),
                                                   s * x0:s * (x0 + pw)][::-1]
             taau = taau[:, :, ::-1] if hflip else taau
@@ -162,15 +163,16 @@ class SequenceDataset(Dataset):
         return item
 
     def _taau_frames(self, video_index: int) -> np.ndarray:
-        """(T, H, W, 3) float32: TAAU over the whole video at this scale, computed once."""
+        """(T, H, W, C) float16: the TAAU history the network takes for each frame of the video (its
+        :class:`~volsr_core.sr.history.HistoryFeed` over the whole video at this scale), computed once."""
         if video_index not in self._taau:
             h5, s = self._file(video_index), self.scale
             colour, motion, jitter = (h5[f"lr{s}/{k}"][()].astype(np.float32) for k in ("color", "motion", "jitter"))
             depth = h5[f"lr{s}/motion_depth" if f"lr{s}/motion_depth" in h5 else f"lr{s}/depth"][()].astype(np.float32)
             rotation = view_rotations(h5["cameras"][()])
-            upsampler = taau_upsampler(s)
-            self._taau[video_index] = np.stack([upsampler(colour[t], motion[t], tuple(jitter[t]), depth[t], rotation[t])
-                                                for t in range(len(colour))])
+            feed = HistoryFeed(self.taau)
+            self._taau[video_index] = np.stack([feed(colour[t], motion[t], tuple(jitter[t]), depth[t], rotation[t])
+                                                for t in range(len(colour))]).astype(np.float16)
         return self._taau[video_index]
 
     def _lr_size(self, video_index: int) -> tuple[int, int]:

@@ -21,7 +21,10 @@ reweighting channel, which carries information from many more frames than N:
 - ``taau_base``: the TAAU estimate of the current frame (:class:`~volsr_core.temporal.taau.
   TemporalUpsampler`, already reprojected and clamped), which is also the base the output adds
   its residual to instead of the bilinearly upscaled colour: the network starts from TAAU and
-  learns what TAAU gets wrong (blur, ghosting, disocclusions).
+  learns what TAAU gets wrong (blur, ghosting, disocclusions); with ``taau_aux`` the history also
+  holds what TAAU's blend threw away (:attr:`TemporalUpsampler.last_aux`: the reprojected history
+  colour and its share of the blend), so the network sees the current frame's samples (its LR
+  inputs), the history and TAAU's confidence in it apart, not only their blend.
 
 Steps 4-5 run on the high-resolution stack *folded* by ``fold`` (pixel unshuffle): ``fold = 1``
 is the paper's network at full resolution (variant L); ``fold = scale`` (variant S) runs every
@@ -31,8 +34,9 @@ the output with a pixel shuffle. The output adds the bilinearly upscaled current
 
 Tensors: ``lr`` (B, N+1, C, h, w), index 0 the current frame; ``motion`` (B, N+1, 2, h, w) each
 frame's vectors to its own previous frame in LR pixels (docs/conventions.md); ``jitter``
-(B, N+1, 2) in LR pixels, +y down; ``history`` (B, 3, H, W): the network's output for the
-previous frame (recurrent) or TAAU's output for this frame (taau_base); None stands in the
+(B, N+1, 2) in LR pixels, +y down; ``history`` (B, ``history_channels``, H, W): the network's
+output for the previous frame (recurrent) or TAAU's output for this frame, then with ``taau_aux``
+its side outputs (taau_base); None stands in the
 bilinearly upscaled current colour (a recurrent network's first frame after a cut). Output
 (B, 3, H, W), H = h*scale, W = w*scale.
 """
@@ -144,7 +148,7 @@ class SuperResolutionNet(nn.Module):
         self.features = FeatureBlock(c, config.feature_width)
         frame_channels = c + 8
         self.rgbd = config.rgbd_channels
-        history = 3 if config.takes_history else 0
+        history = config.history_channels if config.takes_history else 0
         # folded stacks hold d*d sub-pixels per channel: their first layer mixes them with a 1x1
         first = 1 if d > 1 else 3
         if config.weighted_inputs:
@@ -168,7 +172,7 @@ class SuperResolutionNet(nn.Module):
         if cfg.takes_history:
             warped_history = base if history is None else torch.clamp(history, 0.0, 1.0)
             if cfg.taau_base:
-                base = warped_history  # already this frame's: not warped
+                base = warped_history[:, :3]  # already this frame's: not warped
             else:
                 warped_history = backward_warp(warped_history, hr_motion[0])
             if d > 1:

@@ -27,6 +27,7 @@ class NetworkConfig:
     feature_width: int = 32     # the residual block's hidden channels (paper: 32)
     recurrent: bool = False     # history = the previous output, warped to this frame (not in the paper)
     taau_base: bool = False     # history = TAAU's estimate of this frame, and the base the output adds to
+    taau_aux: bool = False      # taau_base, and the history also holds what TAAU's blend threw away (TemporalUpsampler.last_aux)
 
     def __post_init__(self) -> None:
         if self.scale not in SCALES:
@@ -40,6 +41,8 @@ class NetworkConfig:
             raise ValueError(f"fold must divide the scale ({self.scale}), got {self.fold}")
         if self.recurrent and self.taau_base:
             raise ValueError("a network's history is either its previous output (recurrent) or TAAU's (taau_base)")
+        if self.taau_aux and not self.taau_base:
+            raise ValueError("taau_aux adds TAAU's side outputs to a TAAU-based network's history (taau_base)")
         object.__setattr__(self, "features", tuple(self.features))
         object.__setattr__(self, "widths", tuple(self.widths))
 
@@ -51,6 +54,12 @@ class NetworkConfig:
     def takes_history(self) -> bool:
         """Whether the network takes a ``history`` image (recurrent or TAAU-based)."""
         return self.recurrent or self.taau_base
+
+    @property
+    def history_channels(self) -> int:
+        """Channels of the ``history`` input: RGB, plus TAAU's reprojected history RGB and its blend share
+        with ``taau_aux``."""
+        return 7 if self.taau_aux else 3
 
     @property
     def weighted_inputs(self) -> int:
@@ -79,10 +88,10 @@ class NetworkConfig:
 
 def variant_config(variant: str, scale: int = 4, previous_frames: int = 2,
                    features: tuple[str, ...] = ("color", "depth", "max_rgba"),
-                   recurrent: bool = False, taau_base: bool = False) -> NetworkConfig:
+                   recurrent: bool = False, taau_base: bool = False, taau_aux: bool = False) -> NetworkConfig:
     """The sized variants: S folds by the scale (all convolutions at LR), M by scale/2, L by scale/4."""
     variant = variant.upper()
-    history = {"recurrent": recurrent, "taau_base": taau_base}
+    history = {"recurrent": recurrent, "taau_base": taau_base, "taau_aux": taau_aux}
     if variant == "S":
         return NetworkConfig(scale, previous_frames, features, fold=scale, widths=(32, 48, 64), **history)
     if variant == "M":

@@ -78,7 +78,7 @@ class StepBatches(Sampler):
 def build_model(config: TrainingConfig) -> SuperResolutionNet:
     data, model = config.data, config.model
     net = variant_config(model.variant, data.scale, data.previous_frames, data.features, model.recurrent,
-                         model.taau_base)
+                         model.taau_base, model.taau_aux)
     overrides = {k: v for k, v in (("fold", model.fold), ("widths", model.widths)) if v is not None}
     if overrides:
         net = NetworkConfig(**{**net.to_dict(), **overrides})
@@ -110,12 +110,13 @@ class Trainer:
         # a sample carries the frames of `unroll` steps: N previous frames for the oldest step, plus one per step
         self.unroll = config.train.unroll
         frames = data.previous_frames + self.unroll - 1
+        self.taau_network = build_model(config).config if config.model.taau_base else None
         self.train_set = SequenceDataset(data.root, "train", data.scale, frames, data.crop,
                                          data.features, augment=data.augment, seed=config.seed,
-                                         hr_frames=self.unroll, taau=config.model.taau_base)
+                                         hr_frames=self.unroll, taau=self.taau_network)
         self.val_set = SequenceDataset(data.root, "val", data.scale, frames, data.val_crop,
                                        data.features, augment=False, seed=config.seed,
-                                       hr_frames=self.unroll, taau=config.model.taau_base)
+                                       hr_frames=self.unroll, taau=self.taau_network)
         torch.manual_seed(config.seed)
         self.model = build_model(config)
         if config.model.init:

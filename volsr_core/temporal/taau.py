@@ -77,7 +77,7 @@ def _prepass(lr, motion, scale, dis_motion, box):
 
 @numba.njit(**_NB)
 def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, cap, disocclusion, rectify,
-         out, new_history):
+         out, new_history, aux):
     hr_h, hr_w = out.shape[0], out.shape[1]
     lr_h = lr.shape[0]
     v = (y + 0.5) / scale - 0.5 - jy
@@ -177,14 +177,18 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s
         new_history[y, x, 2] = o2
         new_history[y, x, 3] = min(n + a, cap)
         new_history[y, x, 4] = d
+        aux[y, x, 0] = h0  # what the history said (reprojected, rectified; 0 where there was none) ...
+        aux[y, x, 1] = h1
+        aux[y, x, 2] = h2
+        aux[y, x, 3] = n / (n + a)  # ... and its share of the blend
 
 
 @numba.njit(parallel=True, cache=True)
 def _kernel(history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, cap, disocclusion, rectify, out,
-            new_history):
+            new_history, aux):
     for y in numba.prange(out.shape[0]):
         _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, cap, disocclusion, rectify, out,
-             new_history)
+             new_history, aux)
 
 
 def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> np.ndarray:
@@ -235,6 +239,7 @@ class TemporalUpsampler:
         self.disocclusion, self.dis_motion = float(disocclusion), float(dis_motion)
         self.assumed_rotation = float(assumed_rotation)
         self.history: np.ndarray | None = None  # (H, W, 5): RGB, accumulated weight, depth
+        self.last_aux: np.ndarray | None = None  # (H, W, 4) of the last frame: see __call__
         self._spare: np.ndarray | None = None
         self._box: np.ndarray | None = None
         self._cols: dict = {}
@@ -253,6 +258,9 @@ class TemporalUpsampler:
         in degrees (:func:`view_rotation`): 0 (a still camera, a pan or a zoom) accumulates a long
         history with the narrow kernel; None (unknown) treats the frame as still only where every
         motion vector is zero, else as rotating by ``assumed_rotation`` degrees.
+
+        :attr:`last_aux` then holds what the blend threw away, (H, W, 4): the reprojected, rectified
+        history colour (0 where there was none) and its share of the blend, n / (n + a) in [0, 1).
         """
         lr = np.ascontiguousarray(lr_color, dtype=np.float32)
         motion = np.ascontiguousarray(lr_motion, dtype=np.float32)
@@ -294,14 +302,10 @@ class TemporalUpsampler:
         new_history = self._spare if self._spare is not None and self._spare.shape == shape else \
             np.empty(shape, dtype=np.float32)
         out = np.empty(shape[:2] + (3,), dtype=np.float32)
+        aux = np.empty(shape[:2] + (4,), dtype=np.float32)
         _kernel(history, has, lr, motion, depth_arr, self._box, cols, s, jy, inv2s2, cap, disocclusion, not static,
-                out, new_history)
+                out, new_history, aux)
+        self.last_aux = aux
         self._spare = self.history if has else None
         self.history = new_history
         return out
-
-    def upsample_frame(self, frame) -> np.ndarray:
-        """:meth:`__call__` with a FeatureFrame's colour, motion, jitter, ``motion_depth`` and camera rotation."""
-        depth = frame.motion_depth if hasattr(frame, "motion_depth") else frame.depth
-        return self(frame.color, frame.motion, frame.jitter, depth,
-                    view_rotation(frame.camera, frame.previous_camera))
