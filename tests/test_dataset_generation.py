@@ -213,7 +213,7 @@ BAD_CONFIGS = [
     ("{preset: CT-Phantom}", "{}", "volumes[0].transfer_function: needs exactly one of 'preset' or 'file'"),
     ("camera: {pool_size: 8,", "camera: {pool_sise: 8,",
      ("camera.pool_sise: unknown key (allowed: pool_size, view_angle, distance_range, max_roll, focal_jitter, "
-      "max_orbit_speed, max_elevation_speed, zoom_range, max_elevation, max_zoom_speed, period)")),
+      "max_orbit_speed, min_orbit_speed, max_elevation_speed, zoom_range, max_elevation, max_zoom_speed, period)")),
     ("spp: 4", "spp: 4, samples: 2", "ground_truth.samples: unknown key (allowed: mode, spp)"),
     ("videos: 3\n  - name: headsq", "videos: 3\n    colour: red\n  - name: headsq",
      "volumes[0].colour: unknown key (allowed: name, path, phantom_shape, transfer_function, videos, split)"),
@@ -262,8 +262,8 @@ def test_defaults_fill_what_the_config_leaves_out(config_file):
     config = read_config(config_file)
     assert config.pool == {"pool_size": 8, "view_angle": 30.0, "distance_range": [0.9, 1.6], "max_roll": 20.0,
                            "focal_jitter": 0.05}
-    assert config.path == {"max_orbit_speed": 6.0, "max_elevation_speed": 1.5, "zoom_range": [0.8, 1.5],
-                           "max_elevation": 60.0, "max_zoom_speed": 0.01, "period": 30}
+    assert config.path == {"max_orbit_speed": 6.0, "min_orbit_speed": None, "max_elevation_speed": 1.5,
+                           "zoom_range": [0.8, 1.5], "max_elevation": 60.0, "max_zoom_speed": 0.01, "period": 30}
     assert config.volumes[0].phantom_shape == (48, 48, 48) and config.volumes[1].phantom_shape is None
     assert [v.split for v in config.volumes] == [None, None]
     bare = config_file.parent / "bare.yaml"
@@ -296,3 +296,31 @@ def test_shipped_configs_read(shared_data):
     paper = read_config(REPO / "training" / "configs" / "dataset_paper.yaml")
     assert paper.hr_size == (1920, 1920) and paper.scales == (4, 8, 16) and paper.frames_per_video == 100
     assert all(v.videos == 36 for v in paper.volumes)
+
+
+def test_a_speed_range_draws_each_videos_top_orbit_speed(tmp_path):
+    from volsr_core.dataset.config import read_config
+    from volsr_core.dataset.videos import camera_path, load_dataset_volume, plan_videos
+    from volsr_core.scene.camera import rotation_between
+
+    path = tmp_path / "speeds.yaml"
+    path.write_text("""seed: 1
+hr_size: 16
+scales: [4]
+frames_per_video: 12
+previous_frames: 0
+camera: {pool_size: 4, min_orbit_speed: 0.5, max_orbit_speed: 6.0, max_elevation_speed: 0.0, period: 4}
+volumes:
+  - {name: phantom, path: phantom, phantom_shape: [16, 16, 16], transfer_function: {preset: CT-Phantom}, videos: 6}
+""")
+    config = read_config(path)
+    source = load_dataset_volume(config, 0)
+    tops = []
+    for plan in plan_videos(config):
+        cameras = camera_path(config, source, plan)
+        tops.append(max(rotation_between(a, b) for a, b in zip(cameras, cameras[1:])))
+    assert max(tops) <= 6.0 + 1e-6 and min(tops) < 0.6 * max(tops), f"top speeds differ per video: {tops}"
+    path.write_text(path.read_text().replace("min_orbit_speed: 0.5, max_orbit_speed: 6.0", "min_orbit_speed: 7.0"))
+    with pytest.raises(Exception, match="min_orbit_speed, max_orbit_speed: needs low <= high"):
+        read_config(path)
+

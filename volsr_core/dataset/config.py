@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, Literal, get_args
 
 from volsr_core.config_reader import fail, read_dataclass, read_value, read_yaml, setting
+from volsr_core.dataset.store import VERSION as STORE_VERSION
 from volsr_core.errors import InputError
 from volsr_core.scene.presets import get_preset, load_transfer_function
 
@@ -92,7 +93,7 @@ class DatasetConfig:
                "ground_truth": self.ground_truth, "camera": {**self.pool, **self.path},
                "volume": {"name": spec.name, "path": spec.path, "phantom_shape": spec.phantom_shape,
                           "transfer_function": spec.tf_definition, "range": spec.transfer_function["range"]},
-               "volume_index": volume_index, "video_index": video_index}
+               "volume_index": volume_index, "video_index": video_index, "store_version": STORE_VERSION}
         return "sha256:" + hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
 
 
@@ -115,6 +116,8 @@ class _Camera:
     max_roll: float = setting(20.0, low=0.0, high=180.0)
     focal_jitter: float = setting(0.05, low=0.0, high=1.0)
     max_orbit_speed: float = setting(3.0, low=0.0, high=90.0)
+    min_orbit_speed: float | None = setting(None, low=0.01, high=90.0)  # set: each video's top speed is drawn
+    # log-uniformly from [min_orbit_speed, max_orbit_speed] (slow drags and fast turns in one dataset)
     max_elevation_speed: float = setting(1.5, low=0.0, high=90.0)
     zoom_range: tuple[float, float] = setting((0.8, 1.5), low=0.01, expected="[low, high]")
     max_elevation: float = setting(60.0, low=0.1, high=89.9)
@@ -201,6 +204,8 @@ def _camera(file: Path, camera: _Camera) -> tuple[dict[str, Any], dict[str, Any]
     """candidate_pool's and smooth_random_path's arguments ([low, high] pairs as lists)."""
     for key in ("distance_range", "zoom_range"):
         _ordered(file, f"camera.{key}", getattr(camera, key))
+    if camera.min_orbit_speed is not None:
+        _ordered(file, "camera.min_orbit_speed, max_orbit_speed", (camera.min_orbit_speed, camera.max_orbit_speed))
     if not camera.zoom_range[0] <= 1.0 <= camera.zoom_range[1]:
         fail(file, "camera.zoom_range", f"must contain 1 (the start camera), got {list(camera.zoom_range)}")
     values = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(camera).items()}

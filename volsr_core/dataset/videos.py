@@ -142,10 +142,14 @@ def load_dataset_volume(config: DatasetConfig, volume_index: int, device: str = 
 
 
 def camera_path(config: DatasetConfig, source: DatasetVolume, plan: VideoPlan) -> list[Camera]:
-    """The video's cameras: a random start from the volume's pool, then a smooth random path."""
+    """The video's cameras: a random start from the volume's pool, then a smooth random path (its top orbit
+    speed drawn log-uniformly between ``min_orbit_speed`` and ``max_orbit_speed`` when the former is set)."""
     rng = rng_for(config.seed, VIDEO_TAG, plan.volume_index, plan.video_index)
     start = random_start(source.pool, rng)
     args = {**config.path, "zoom_range": tuple(config.path["zoom_range"])}
+    low = args.pop("min_orbit_speed", None)
+    if low is not None:
+        args["max_orbit_speed"] = float(np.exp(rng.uniform(np.log(low), np.log(args["max_orbit_speed"]))))
     return smooth_random_path(start, config.frames_per_video, rng, bounds=source.volume.bounds, **args)
 
 
