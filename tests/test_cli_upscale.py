@@ -75,7 +75,11 @@ def test_phantom_orbit_to_png_frames_and_mp4_with_psnr_summary(tmp_path, model_s
     assert "upscaled 1 of 1 input(s) 4x with s4.onnx" in out
     line = next(line for line in out.splitlines() if line.strip().startswith("phantom:"))
     assert "3 frames of 64x64 from 16x16" in line and "network" in line
-    assert "PSNR vs 2-spp native render" in line and "VolSR" in line and "bilinear" in line
+    assert "mean PSNR vs 2-spp native" in line and "VolSR" in line and "bilinear" in line
+    summary = (tmp_path / "out" / "summary.md").read_text()
+    rows = [row.split("|")[1:-1] for row in summary.splitlines() if row.startswith("| phantom")]
+    assert [r[3].strip() for r in rows] == ["VolSR", "bilinear"], "every method measured, with its time and PSNR"
+    assert all(float(r[4]) > 0 and 5 < float(r[6]) < 100 for r in rows)
     assert not leftovers(tmp_path)
 
 
@@ -92,6 +96,9 @@ def test_side_by_side_frames_are_three_panels_wide(tmp_path, model_s4):
         assert (corner.min(axis=-1) > 120).any() and np.all(corner == 0, axis=-1).any()
     frames = read_video(tmp_path / "sbs.mp4")
     assert len(frames) == 2 and frames[0].shape == (48, 192, 3)
+    summary = (tmp_path / "summary.md").read_text()
+    native_row = next(row for row in summary.splitlines() if "| native 1 spp |" in row)
+    assert native_row.split("|")[6].strip() == "1.00", "times are shown against the native 1-spp render's"
 
 
 def test_dicom_folder(tmp_path, model_s4, headsq_dicom, capsys):

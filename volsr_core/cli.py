@@ -157,6 +157,7 @@ AUTO_VARIANT_RULE = ("auto: the largest shipped variant (L > M > S) whose networ
 
 def cmd_upscale(args: argparse.Namespace) -> int:
     from volsr_core.apps import upscale as batch
+    from volsr_core.atomic import atomic_write
     from volsr_core.images import require_video
     from volsr_core.render import RayCaster
     from volsr_core.runtime.engines import open_engine
@@ -225,6 +226,10 @@ def cmd_upscale(args: argparse.Namespace) -> int:
           + (f" with {Path(str(model)).name}" if model is not None else "") + (f", {failed} failed" if failed else ""))
     for s in summaries:
         print("  " + s.line())
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_write(out / "summary.md", "w", encoding="utf-8") as fh:
+        fh.write(batch.summary_markdown(summaries, args.scale, Path(str(model)).name if model is not None else "-"))
+    print(f"  summary: {out / 'summary.md'}")
     return 1 if failed else 0
 
 

@@ -186,6 +186,7 @@ class InputSummary:
     low_resolution_size: tuple[int, int] = (0, 0)
     timings: dict[str, list[float]] = field(default_factory=lambda: {"render_ms": [], "network_ms": [],
                                                                      "total_ms": []})
+    method_ms: dict[str, list[float]] = field(default_factory=dict)  # method -> total ms per frame
     psnr: dict[str, list[float]] = field(default_factory=dict)   # method -> dB per frame
     reference_spp: int = 0
     outputs: list[Path] = field(default_factory=list)
@@ -197,20 +198,48 @@ class InputSummary:
         values = self.timings[stage]
         return statistics.median(values) if values else float("nan")
 
+    def method_line(self, method: str) -> str:
+        """``method``'s median ms per frame and, when measured, its mean PSNR: "VolSR 41.9 ms, 31.41 dB"."""
+        text = f"{method} {statistics.median(self.method_ms[method]):.1f} ms"
+        return text + (f", {np.mean(self.psnr[method]):.2f} dB" if method in self.psnr else "")
+
     def line(self) -> str:
         if self.error is not None:
             done = f" after {self.frames} frame(s)" if self.frames else ""
             return f"{self.name}: FAILED{done}: {self.error}"
         (w, h), (lw, lh) = self.size, self.low_resolution_size
-        text = (f"{self.name}: {self.frames} frames of {w}x{h} from {lw}x{lh}; ms per frame (median): "
+        text = (f"{self.name}: {self.frames} frames of {w}x{h} from {lw}x{lh}; VolSR ms per frame (median): "
                 f"LR render {self.ms('render_ms'):.1f}, network {self.ms('network_ms'):.1f}, "
                 f"total {self.ms('total_ms'):.1f}")
-        if self.psnr:
-            scores = ", ".join(f"{m} {np.mean(v):.2f} dB" for m, v in self.psnr.items())
-            text += f"; PSNR vs {self.reference_spp}-spp native render (mean): {scores}"
+        if len(self.method_ms) > 1 or self.psnr:
+            text += (f"; per method (median ms, mean PSNR vs {self.reference_spp}-spp native)" if self.psnr
+                     else "; per method (median ms)")
+            text += ": " + " | ".join(self.method_line(m) for m in self.method_ms)
         if self.outputs:
             text += f"; wrote {self.outputs[0].parent}/" + "".join(f", {p}" for p in self.outputs if p.suffix == ".mp4")
         return text
+
+
+def summary_markdown(summaries: Sequence[InputSummary], scale: int, model: str) -> str:
+    """OUT/summary.md: per input and method, median ms per frame, its ratio to the native 1-spp render's
+    and mean PSNR, so the trade between time and quality reads at a glance."""
+    lines = [f"# volsr upscale: {scale}x with {model}", "",
+             "| input | frames | size | method | ms per frame (median) | time / native 1 spp | PSNR dB (mean) |",
+             "|---|---:|---|---|---:|---:|---:|"]
+    for s in summaries:
+        if s.error is not None:
+            lines.append(f"| {s.name} | {s.frames} | | FAILED: {s.error} | | | |")
+            continue
+        native = s.method_ms.get("native 1 spp")
+        for method, values in s.method_ms.items():
+            ms = statistics.median(values)
+            ratio = f"{ms / statistics.median(native):.2f}" if native else "-"
+            psnr = f"{np.mean(s.psnr[method]):.2f}" if method in s.psnr else "-"
+            lines.append(f"| {s.name} | {s.frames} | {s.size[0]}x{s.size[1]} | {method} | {ms:.1f} | {ratio} | {psnr} |")
+    reference = next((s.reference_spp for s in summaries if s.reference_spp), 0)
+    if reference:
+        lines += ["", f"PSNR against a {reference}-spp native render of every frame."]
+    return "\n".join(lines) + "\n"
 
 
 def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, video: str | os.PathLike | None = None,
@@ -248,7 +277,11 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
         bar = stack.enter_context(tqdm(total=len(cameras), desc=summary.name, unit="frame", disable=not progress,
                                        leave=False))
         for i, camera in enumerate(cameras):
-            results = {name: method(camera).image for name, method in methods.items()}
+            results = {}
+            for name, method in methods.items():
+                frame = method(camera)
+                results[name] = frame.image
+                summary.method_ms.setdefault(name, []).append(frame.ms_total)
             for stage, ms in pipeline.last_timings.items():
                 summary.timings[stage].append(ms)
             if reference_spp:
