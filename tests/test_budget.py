@@ -1,0 +1,84 @@
+"""Frame-budget rendering (runtime/budget.py): the level that fits the budget while moving, and progressive
+refinement to the native N-spp image while still. On the CPU, the phantom, small untrained models."""
+from __future__ import annotations
+
+import statistics
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+pytest.importorskip("onnxruntime")
+
+from volsr_core.io import make_phantom  # noqa: E402
+from volsr_core.runtime.budget import BudgetRenderer, Level, levels  # noqa: E402
+from volsr_core.runtime.export import export_onnx  # noqa: E402
+from volsr_core.scene import Volume, get_preset  # noqa: E402
+from volsr_core.scene.camera_paths import orbit_around  # noqa: E402
+from volsr_core.sr.metrics import psnr_ssim  # noqa: E402
+from volsr_core.sr.network import SuperResolutionNet, variant_config  # noqa: E402
+from volsr_core.temporal.supersample import render_supersampled  # noqa: E402
+
+SIZE = (192, 192)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    import torch
+
+    torch.manual_seed(0)
+    folder = tmp_path_factory.mktemp("budget")
+    files = {Level(s, "S"): export_onnx(SuperResolutionNet(variant_config("S", s, 0, taau_base=True)),
+                                        folder / f"s{s}.onnx") for s in (2, 4)}
+    volume = Volume.from_record(make_phantom(shape=(96, 96, 96)))
+    return volume, get_preset("CT-Phantom"), files
+
+
+def test_levels_run_finest_first():
+    shipped = [{"scale": 4, "variant": "S"}, {"scale": 2, "variant": "S"}, {"scale": 4, "variant": "M"}]
+    assert [lv.label for lv in levels(shipped)] == ["native 1 spp", "VolSR S 2x", "VolSR M 4x", "VolSR S 4x"]
+
+
+def test_a_moving_camera_takes_the_finest_level_within_the_budget_and_keeps_to_it(scene):
+    volume, tf, files = scene
+    choices = [Level(1), *files]
+    probe = BudgetRenderer(volume, tf, 1e6, size=SIZE, choices=choices, model_files=files, threads=2)
+    cameras = orbit_around(probe.caster.visible_bounds(), 30, 2.0)
+    probe.render(cameras[0])  # calibrates every level
+    measured = {level: probe.estimates[level] for level in choices}
+    assert measured[Level(1)] > measured[Level(4, "S")], "native full size costs more than 4x from a quarter"
+    budget = 1.25 * measured[Level(4, "S")]  # 4x fits; the finer levels (2x, native) are the costlier ones
+    renderer = BudgetRenderer(volume, tf, budget, size=SIZE, choices=choices, model_files=files, threads=2)
+    times, labels = [], []
+    for camera in cameras:
+        renderer.render(camera)
+        times.append(renderer.state.ms)
+        labels.append(renderer.state.level)
+    moving = times[5:]
+    print(f"budget {budget:.1f} ms: median {statistics.median(moving):.1f} ms; levels {set(labels[5:])}; "
+          f"estimates {renderer.state.ms_estimates}")
+    assert statistics.median(moving) <= 1.2 * budget, "the budget is met"
+    finest_fitting = next(level for level in choices if renderer.estimates[level] <= budget)
+    assert labels[-1] == finest_fitting.label, "the finest level that fits is the one drawn"
+    assert "still" not in labels
+
+
+def test_a_still_camera_refines_to_the_native_supersampled_image(scene):
+    volume, tf, files = scene
+    renderer = BudgetRenderer(volume, tf, 5.0, size=SIZE, choices=[Level(1), Level(4, "S")], model_files=files,
+                              threads=2)
+    cameras = orbit_around(renderer.caster.visible_bounds(), 4, 2.0)
+    for camera in cameras:  # moving: the tight budget takes the 4x level
+        renderer.render(camera)
+    assert renderer.state.level == "VolSR S 4x"
+    still = cameras[-1]
+    truth = render_supersampled(renderer.caster, still, *SIZE, spp=16, seed=5 * 10**6)
+    native4 = render_supersampled(renderer.caster, still, *SIZE, spp=4, seed=7 * 10**6)
+    for _ in range(32):
+        image = renderer.render(still)
+    assert renderer.state.level == "still" and renderer.state.still_samples == 32
+    ours, four = psnr_ssim(image, truth, channel_axis=-1)[0], psnr_ssim(native4, truth, channel_axis=-1)[0]
+    print(f"still camera after 32 frames: {ours:.2f} dB; native 4 spp {four:.2f} dB (against 16 spp)")
+    assert ours >= four - 1.0
+    renderer.render(cameras[0])
+    assert renderer.state.level != "still" and renderer.state.still_samples == 0, "a move ends the refinement"

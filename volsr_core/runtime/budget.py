@@ -1,0 +1,171 @@
+"""Frame-budget rendering: per frame, the finest level that fits a time budget; still frames refine.
+
+As VTK's AutoAdjustSampleDistances picks its sample distance from the last frame times, a
+:class:`BudgetRenderer` keeps a running estimate of each level's ms per frame and renders every
+moving frame with the finest level whose estimate fits ``budget_ms``. The levels, finest first:
+native full size, then the shipped models from the smallest scale and largest variant down
+(:func:`levels`): each a :class:`~volsr_core.runtime.pipeline.Pipeline` with its own history.
+
+While the camera holds still, frames refine progressively instead: every frame adds one more
+Halton-jittered full-size sample per pixel (ray starts jittered per sample) to a running mean,
+which after N frames *is* the native N-spp image (:func:`~volsr_core.temporal.supersample.
+render_supersampled`'s box filter). Such a frame costs one native render whatever the budget, as
+VTK's still render does; the next move returns to the budget.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from volsr_core.render.raycaster import RayCaster
+from volsr_core.runtime.pipeline import Pipeline
+from volsr_core.scene.camera import Camera
+from volsr_core.scene.transfer_function import TransferFunction
+from volsr_core.scene.volume import Volume
+from volsr_core.temporal.jitter import halton_jitter
+
+VARIANT_ORDER = ("L", "M", "S")  # larger first: better at the same scale
+STILL_SEED = 10**6  # ray-start seeds of still samples, apart from the moving frames' (which count frames)
+
+
+@dataclass(frozen=True)
+class Level:
+    """One way to make a frame: ``scale`` 1 (native full size) or a shipped model's scale and ``variant``."""
+
+    scale: int
+    variant: str | None = None
+
+    @property
+    def label(self) -> str:
+        return "native 1 spp" if self.scale == 1 else f"VolSR {self.variant} {self.scale}x"
+
+
+def levels(shipped: Sequence[dict[str, Any]]) -> list[Level]:
+    """Native full size, then the shipped models (registry entries), finest first: smaller scale first,
+    larger variant first within a scale."""
+    models = sorted((Level(int(e["scale"]), e["variant"]) for e in shipped),
+                    key=lambda lv: (lv.scale, VARIANT_ORDER.index(lv.variant) if lv.variant in VARIANT_ORDER else 9))
+    return [Level(1)] + models
+
+
+@dataclass
+class BudgetState:
+    """What the last frame did: its level ("still" while refining), ms, and still samples accumulated."""
+
+    level: str = ""
+    ms: float = 0.0
+    still_samples: int = 0
+    ms_estimates: dict[str, float] = field(default_factory=dict)
+
+
+class BudgetRenderer:
+    """Renders ``volume`` at ``size`` within ``budget_ms`` per moving frame (see the module docstring).
+
+    - ``choices``: the :class:`Level` list to choose from, finest first (default :func:`levels` of the
+      shipped models); ``model_files`` maps a level to its model file (default: the shipped one);
+    - ``smoothing``: weight of a new measurement in a level's running ms estimate;
+    - ``finer_margin``: a finer level is taken only when its estimate is below this fraction of the
+      budget (hysteresis: levels do not alternate frame by frame, which would drop the history);
+    - ``device``, ``threads``, ``sample_distance``, ``background``: as :class:`Pipeline` takes them.
+
+    Every level is timed once on the first camera before the first frame (kernels compile, sessions
+    warm up), which seeds the estimates. ``render(camera)`` returns float32 (H, W, 3) in [0, 1];
+    ``state`` says what the frame was.
+    """
+
+    def __init__(self, volume: Volume, transfer_function: TransferFunction, budget_ms: float, *,
+                 size: tuple[int, int] = (512, 512), choices: Sequence[Level] | None = None,
+                 model_files: dict[Level, Any] | None = None, smoothing: float = 0.3, finer_margin: float = 0.9,
+                 device: str = "cpu", threads: int | None = None, sample_distance: float | None = None,
+                 background: tuple[float, float, float] = (0.0, 0.0, 0.0)):
+        if not budget_ms > 0:
+            raise ValueError(f"budget_ms must be positive, got {budget_ms}")
+        from volsr_core.runtime.models import model_file, shipped_models
+
+        self.budget_ms, self.size = float(budget_ms), (int(size[0]), int(size[1]))
+        self.smoothing, self.finer_margin = float(smoothing), float(finer_margin)
+        self.choices = list(choices) if choices is not None else levels(shipped_models())
+        files = dict(model_files or {})
+        self.caster = RayCaster(volume, transfer_function, sample_distance=sample_distance, device=device,
+                                background=background, start_jitter="ign")
+        self.pipelines: dict[Level, Pipeline] = {}
+        for level in self.choices:
+            if level.scale > 1:
+                model = files.get(level) or model_file(level.variant, level.scale)
+                self.pipelines[level] = Pipeline(volume, transfer_function, model, scale=level.scale, size=self.size,
+                                                 variant=level.variant, device=device, threads=threads,
+                                                 sample_distance=sample_distance, background=background)
+        self.estimates: dict[Level, float] = {}
+        self.current: Level | None = None
+        self.state = BudgetState()
+        self._last_camera: Camera | None = None
+        self._still_sum: np.ndarray | None = None
+        self._still_count = 0
+
+    # timing ----------------------------------------------------------------------------------------
+    def _calibrate(self, camera: Camera) -> None:
+        """One untimed and one timed frame of every level on ``camera``; their histories are then dropped."""
+        for level in self.choices:
+            self._render_level(level, camera)
+            started = time.perf_counter()
+            self._render_level(level, camera)
+            self.estimates[level] = 1000.0 * (time.perf_counter() - started)
+            if level in self.pipelines:
+                self.pipelines[level].reset("calibrated")
+
+    def choose(self) -> Level:
+        """The finest level whose estimate fits the budget (a finer one than the current only with margin);
+        the coarsest when none does."""
+        for level in self.choices:
+            limit = self.budget_ms
+            if self.current is not None and self.choices.index(level) < self.choices.index(self.current):
+                limit *= self.finer_margin
+            if self.estimates[level] <= limit:
+                return level
+        return self.choices[-1]
+
+    # rendering -------------------------------------------------------------------------------------
+    def _render_level(self, level: Level, camera: Camera) -> np.ndarray:
+        if level.scale == 1:
+            return self.caster.render(camera, *self.size).color.copy()
+        return self.pipelines[level].render(camera)
+
+    def _is_still(self, camera: Camera) -> bool:
+        last = self._last_camera
+        return last is not None and camera.to_dict() == last.to_dict()
+
+    def _refine(self, camera: Camera) -> np.ndarray:
+        """One more jittered full-size sample per pixel into the running mean: after N still frames the
+        native N-spp image (the Halton offsets and ray-start seeds of ``render_supersampled(..., seed=STILL_SEED)``)."""
+        k = self._still_count
+        frame = self.caster.render(camera, *self.size, jitter=halton_jitter(k, 1 << 16), seed=STILL_SEED + k)
+        colour = frame.color.astype(np.float64)
+        self._still_sum = colour if self._still_sum is None else self._still_sum + colour
+        self._still_count = k + 1
+        return (self._still_sum / self._still_count).astype(np.float32)
+
+    def render(self, camera: Camera) -> np.ndarray:
+        """The frame for ``camera``: float32 (H, W, 3) in [0, 1], H, W = ``size``."""
+        if not self.estimates:
+            self._calibrate(camera)
+        started = time.perf_counter()
+        if self._is_still(camera):
+            image, label = self._refine(camera), "still"
+        else:
+            self._still_sum, self._still_count = None, 0
+            level = self.choose()
+            if level != self.current and level in self.pipelines:
+                self.pipelines[level].reset("level changed")
+            self.current = level
+            image, label = self._render_level(level, camera), level.label
+        ms = 1000.0 * (time.perf_counter() - started)
+        if label != "still":
+            previous = self.estimates[self.current]
+            self.estimates[self.current] = (1.0 - self.smoothing) * previous + self.smoothing * ms
+        self._last_camera = camera
+        self.state = BudgetState(label, ms, self._still_count,
+                                 {level.label: round(v, 2) for level, v in self.estimates.items()})
+        return image
