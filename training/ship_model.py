@@ -54,7 +54,8 @@ def main() -> None:
             raise SystemExit(f"{path}: {path.stat().st_size / 2**20:.1f} MiB, over the 10 MiB limit")
     cfg = model.config
     entry = {"name": args.name, "variant": args.variant, "scale": cfg.scale, "previous_frames": cfg.previous_frames,
-             "recurrent": cfg.recurrent, "taau_base": cfg.taau_base, "features": list(cfg.features),
+             "recurrent": cfg.recurrent, "taau_base": cfg.taau_base, "taau_aux": cfg.taau_aux,
+             "features": list(cfg.features),
              "files": {"pt": pt.name, "onnx": onnx_path.name, "card": f"{args.name}.md"},
              "sha256": {"pt": file_sha256(pt), "onnx": file_sha256(onnx_path)},
              "parameters": sum(p.numel() for p in model.parameters())}
@@ -68,6 +69,7 @@ def main() -> None:
     card = [f"# Model card: {args.name}", "",
             f"VolSR variant {args.variant}, {cfg.scale}x per axis, {'recurrent, ' if cfg.recurrent else ''}"
             f"{'TAAU-based (refines the TAAU estimate of each frame; the upscaler runs TAAU before it), ' if cfg.taau_base else ''}"
+            f"{'seeing what TAAU threw away (the reprojected history and its share of the blend), ' if cfg.taau_aux else ''}"
             f"{cfg.previous_frames} previous frames, inputs {', '.join(cfg.features)}; "
             f"{entry['parameters']:,} parameters. Files: `{pt.name}` ({pt.stat().st_size / 2**20:.2f} MiB, weights "
             f"only, `torch.load(weights_only=True)`), `{onnx_path.name}` ({onnx_path.stat().st_size / 2**20:.2f} MiB, "
