@@ -26,8 +26,8 @@ setup(
         # Hosts bring their own VTK (Slicer, ParaView): never a hard dependency.
         "vtk": ["vtk>=9.3"],
         "pyvista": ["pyvista>=0.43"],
-        "torch": ["torch>=2.2,<3", "scikit-image>=0.22", "matplotlib>=3.7"],
-        "onnx": ["onnxruntime>=1.17", "onnx>=1.15"],
+        "torch": ["torch>=2.6,<3", "scikit-image>=0.22", "matplotlib>=3.7"],
+        "onnx": ["onnxruntime>=1.17", "onnx>=1.17", "onnxscript>=0.5"],  # onnxscript: export (with torch)
         "cuda": ["numba-cuda>=0.20"],
         "video": ["imageio>=2.30", "imageio-ffmpeg>=0.4"],  # volsr upscale --video (MP4 through ffmpeg)
         "dev": ["pytest>=8", "pytest-xdist>=3", "scikit-image>=0.22", "matplotlib>=3.7", "numba-cuda>=0.20"],

@@ -177,24 +177,58 @@ def test_auto_variant_rule(capsys):
     assert "the network must be cheaper than rendering natively" in " ".join(capsys.readouterr().out.split())
 
 
-def test_variant_auto_picks_from_the_shipped_registry(tmp_path, monkeypatch, model_s4, small_volume, capsys):
+@pytest.fixture(scope="module")
+def registry_s_m(tmp_path_factory, model_s4):
+    """A models folder shipping S and M at 4x (untrained), as models.json lists them."""
     import shutil
 
     import torch
 
+    folder = tmp_path_factory.mktemp("registry")
     torch.manual_seed(1)
-    shutil.copy(model_s4, tmp_path / "s4.onnx")
-    export_onnx(SuperResolutionNet(variant_config("M", 4, 0, recurrent=True)), tmp_path / "m4.onnx")
+    shutil.copy(model_s4, folder / "s4.onnx")
+    export_onnx(SuperResolutionNet(variant_config("M", 4, 0, recurrent=True)), folder / "m4.onnx")
     entries = [{"name": f"volsr-{v.lower()}4", "variant": v, "scale": 4, "files": {"onnx": f"{v.lower()}4.onnx"},
-                "sha256": {"onnx": file_sha256(tmp_path / f"{v.lower()}4.onnx")}} for v in ("S", "M")]
-    (tmp_path / "models.json").write_text(json.dumps({"models": entries}))
-    monkeypatch.setattr(models, "models_dir", lambda: tmp_path)
+                "sha256": {"onnx": file_sha256(folder / f"{v.lower()}4.onnx")}} for v in ("S", "M")]
+    (folder / "models.json").write_text(json.dumps({"models": entries}))
+    return folder
+
+
+def run_auto(tmp_path, small_volume, capsys) -> tuple[str, str]:
+    """``volsr upscale --variant auto`` on the small volume: (the variant chosen, all it printed)."""
     code = main(["upscale", str(small_volume), "--variant", "auto", "--orbit", "1", "--size", "32",
                  "--out", str(tmp_path / "out")])
     assert code == 0
     out = capsys.readouterr().out
     line = next(line for line in out.splitlines() if line.startswith("variant auto:"))
-    chosen = line.rsplit("-> ", 1)[1]
-    assert chosen in ("S", "M") and "budget (native 1-spp render)" in line and "M " in line
-    assert f"with {chosen.lower()}4.onnx" in out
+    assert "budget (native 1-spp render)" in line
     assert (tmp_path / "out" / "small" / "frame_0000.png").is_file()
+    return line.rsplit("-> ", 1)[1], out
+
+
+def test_variant_auto_picks_from_the_shipped_registry(tmp_path, monkeypatch, registry_s_m, small_volume, capsys):
+    """The times measured on this machine, recorded as they are taken, decide the variant the rule must pick."""
+    monkeypatch.setattr(models, "models_dir", lambda: registry_s_m)
+    measured: dict[str, float] = {}
+    network_ms, native_render_ms = batch.network_ms, batch.native_render_ms
+    monkeypatch.setattr(batch, "network_ms", lambda engine, *a: measured.setdefault(engine.path.name,
+                                                                                   network_ms(engine, *a)))
+    monkeypatch.setattr(batch, "native_render_ms", lambda *a: measured.setdefault("budget", native_render_ms(*a)))
+    chosen, out = run_auto(tmp_path, small_volume, capsys)
+    m_fits = measured["m4.onnx"] <= measured["budget"]
+    assert chosen == ("M" if m_fits else "S")
+    assert ("s4.onnx" in measured) is not m_fits, "S is timed only when M does not fit"
+    assert f"with {chosen.lower()}4.onnx" in out
+
+
+@pytest.mark.parametrize("budget, expected", [(50.0, "M"), (40.0, "M"), (39.0, "S")])
+def test_variant_auto_takes_the_largest_that_fits_the_budget(tmp_path, monkeypatch, registry_s_m, small_volume,
+                                                              capsys, budget, expected):
+    """M takes 40 ms and S 10 ms per frame: M fits a budget of 40 ms or more, S takes the rest."""
+    monkeypatch.setattr(models, "models_dir", lambda: registry_s_m)
+    monkeypatch.setattr(batch, "network_ms", lambda engine, *a: {"m4.onnx": 40.0, "s4.onnx": 10.0}[engine.path.name])
+    monkeypatch.setattr(batch, "native_render_ms", lambda *a: budget)
+    chosen, out = run_auto(tmp_path, small_volume, capsys)
+    assert chosen == expected and f"with {expected.lower()}4.onnx" in out
+    times = "M 40 ms" if expected == "M" else "M 40 ms, S 10 ms"
+    assert f"network per 32x32 frame {times}; budget (native 1-spp render) {budget:.0f} ms -> {expected}" in out

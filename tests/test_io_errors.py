@@ -237,6 +237,34 @@ def test_truncated_pixel_data_names_the_file(headsq_copy):
     expect_error(headsq_copy, "cannot decode the pixel data", "less than expected", name=victim.name)
 
 
+def test_a_header_cut_before_the_series_uid_is_named_not_ignored(headsq_copy):
+    """Such a file belongs to no series: it used to be dropped silently as "non-DICOM"."""
+    by_position = files_by_position(headsq_copy)
+    victim = by_position[60]
+    data = victim.read_bytes()
+    victim.write_bytes(data[: data.index(b"\x20\x00\x0e\x00")])  # cut at (0020,000E) SeriesInstanceUID
+    expect_error(headsq_copy, "DICOM file without SeriesInstanceUID", "CLI --resample", name=victim.name)
+    record = read_volume(headsq_copy, resample=True)
+    assert record.array.shape[0] == 93
+    assert f"skipped 1 damaged file: {victim.name} (DICOM file without SeriesInstanceUID" in " ".join(record.notes)
+    assert f"filled slice 60 between {by_position[59].name} and {by_position[61].name} (3 mm gap)" in record.notes[-1]
+
+
+def test_resample_fills_the_slice_of_a_file_whose_pixel_data_is_cut(headsq_dicom, headsq_copy):
+    whole = read_volume(headsq_dicom).array
+    by_position = files_by_position(headsq_copy)
+    victim = by_position[50]
+    data = victim.read_bytes()
+    victim.write_bytes(data[: len(data) - 3000])
+    expect_error(headsq_copy, "cannot decode the pixel data", "CLI --resample", name=victim.name)
+    record = read_volume(headsq_copy, resample=True)
+    assert record.array.shape == whole.shape
+    np.testing.assert_allclose(record.array[50], 0.5 * (whole[49] + whole[51]), atol=1e-3)
+    np.testing.assert_array_equal(record.array[49], whole[49])
+    assert "filled slice 50 between" in record.notes[-1]
+    assert f"skipped 1 damaged file: {victim.name}" in record.notes[-2]
+
+
 def test_header_cut_short_names_the_file(headsq_copy):
     """A file cut after its SeriesInstanceUID but before its geometry still belongs to the series."""
     victim = files_by_position(headsq_copy)[30]

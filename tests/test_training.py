@@ -156,3 +156,16 @@ def test_changes_to_a_config_are_checked_as_the_file_is(tmp_path):
         config.updated({"train": {"stepz": 3}})
     with pytest.raises(InputError, match="config changes: data.scale: expected an integer"):
         config.updated({"data": {"scale": "4"}})
+
+
+def test_one_trainer_per_run_folder(tmp_path):
+    from volsr_core.errors import OutputError
+    from volsr_core.sr.training import run_folder_lock
+
+    with run_folder_lock(tmp_path / "run"):
+        assert (tmp_path / "run" / "train.lock").read_text() == f"{os.getpid()}\n"
+        with pytest.raises(OutputError, match=rf"train.lock: another volsr train \(pid {os.getpid()}\) is training"):
+            with run_folder_lock(tmp_path / "run"):
+                pass
+    with run_folder_lock(tmp_path / "run"):  # released when the first one ended
+        pass

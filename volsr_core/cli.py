@@ -1,6 +1,8 @@
 """The ``volsr`` command: one entry point, a subcommand per job.
 
-Bad input prints one line ``volsr: error: <file>: <problem>`` and exits with status 2.
+Bad input, a bad option, or an output that cannot be written (no permission, read-only, full) prints one
+line ``volsr: error: <file or option>: <problem>`` and exits with status 2; outputs are checked before any
+work starts, and a write that fails later leaves no partial file.
 """
 from __future__ import annotations
 
@@ -12,13 +14,24 @@ from typing import Sequence
 
 import numpy as np
 
-from volsr_core.apps.options import add_volume_arguments, load_volume_argument, parse_range, parse_size
-from volsr_core.errors import InputError, VolSRError
+from volsr_core.apps.options import (
+    IMAGE_SUFFIXES, MAX_SAMPLES_PER_VOXEL, add_volume_arguments, check_sample_distance, load_volume_argument, number,
+    output_file, output_folder, parse_range, parse_rgb, parse_size,
+)
+from volsr_core.errors import WRITE_ERRNOS, InputError, OutputError, VolSRError, require_extra, write_error
+
+
+# option types: finite numbers in range, with their units (apps/options.py)
+DEGREES = number("degrees", -360, 360)
+ELEVATION = number("degrees", -90, 90)
+MILLIMETRES = number("mm", 0, low_open=True)
+AT_LEAST_1 = number(low=1, integer=True)
+AT_LEAST_0 = number(low=0, integer=True)
 
 
 # -- volsr info -----------------------------------------------------------------------------------
 def cmd_info(args: argparse.Namespace) -> int:
-    volume = load_volume_argument(args)
+    volume = load_volume_argument(args, report_repairs=False)  # every note is printed below
     nx, ny, nz = volume.shape_xyz
     lo, hi = volume.value_range
     p_lo, p_hi = volume.percentiles()
@@ -55,6 +68,18 @@ def cameras_for(args: argparse.Namespace, caster, n_default: int = 1) -> list:
                         aspect=width / height)
 
 
+def check_render_out(out: str) -> None:
+    """``render --out`` before any work: one ``.png`` file (in a writable folder) or a writable folder. Render
+    writes PNG only: a name with another image extension is refused, never taken as a folder's name."""
+    target = Path(out)
+    if target.suffix.lower() == ".png":
+        output_file(target)
+    elif target.suffix.lower() in IMAGE_SUFFIXES:
+        raise OutputError(target, "volsr render writes PNG only; name a .png file or a folder")
+    else:
+        output_folder(target, takes="a folder or one .png file")
+
+
 def output_paths(out: str, n_frames: int) -> tuple[list[Path], Path]:
     """PNG paths for the frames and the folder they go in; a single frame may be named '*.png'."""
     target = Path(out)
@@ -79,7 +104,9 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     if args.taa and args.spp > 1:
         raise InputError(None, "--taa accumulates one jittered sample per frame; it does not combine with --spp")
+    check_render_out(args.out)
     volume = load_volume_argument(args)
+    check_sample_distance(args.sample_distance, volume)
     tf = choose_transfer_function(volume, args.preset, args.tf, args.tf_name, args.range)
     caster = RayCaster(volume, tf, sample_distance=args.sample_distance, device=args.device,
                        background=args.background)
@@ -114,12 +141,15 @@ def cmd_dataset(args: argparse.Namespace) -> int:
     from volsr_core.dataset.videos import generate, parse_shard
 
     shard = parse_shard(args.shard)
-    generate(read_config(args.config), args.out, shard=shard, device=args.device)
+    config = read_config(args.config)
+    generate(config, output_folder(args.out), shard=shard, device=args.device)
     return 0
 
 
 # -- volsr train ----------------------------------------------------------------------------------
 def cmd_train(args: argparse.Namespace) -> int:
+    for module in ("torch", "skimage"):
+        require_extra(module, "volsr train")
     from volsr_core.sr.config import load_training_config
     from volsr_core.sr.training import Trainer
 
@@ -135,9 +165,12 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 # -- volsr eval -----------------------------------------------------------------------------------
 def cmd_eval(args: argparse.Namespace) -> int:
+    for module in ("torch", "skimage", "matplotlib"):
+        require_extra(module, "volsr eval")
     from volsr_core.apps.evaluate import evaluate, write_report
     from volsr_core.sr.checkpoint import load_model
 
+    output_folder(args.out)
     model = load_model(args.model)
     results, showcase = evaluate(model, args.data, args.split)
     written = write_report(results, showcase, args.out)
@@ -157,7 +190,7 @@ AUTO_VARIANT_RULE = ("auto: the largest shipped variant (L > M > S) whose networ
 
 def cmd_upscale(args: argparse.Namespace) -> int:
     from volsr_core.apps import upscale as batch
-    from volsr_core.atomic import atomic_write
+    from volsr_core.atomic import atomic_write, stale_parts
     from volsr_core.images import require_video
     from volsr_core.render import RayCaster
     from volsr_core.runtime.engines import open_engine
@@ -166,18 +199,17 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     from volsr_core.scene.camera_paths import read_camera_path
     from volsr_core.scene.presets import choose_transfer_function, get_preset, load_transfer_function
 
-    if args.reference_spp < 0 or args.fps <= 0:
-        raise InputError(None, "--reference-spp must be 0 (off) or more and --fps positive")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "exists and is not a folder")
+    out = output_folder(args.out)
+    if args.video is not None:
+        if Path(args.video).suffix.lower() == ".mp4":
+            output_file(args.video)
+        else:
+            output_folder(args.video, "--video", takes="a .mp4 file or a folder")
+        require_video()
+    if args.reference_spp:
+        require_extra("skimage", "--reference-spp (PSNR)")
     inputs = batch.expand_inputs(args.inputs)
     videos = batch.video_paths(args.video, [item.name for item in inputs])
-    if videos:
-        require_video()
-    for path in {v.parent for v in videos.values()}:
-        if path.exists() and not path.is_dir():
-            raise InputError(path, "exists and is not a folder")
     # what every input shares is checked once, before any rendering
     if args.camera_path:
         read_camera_path(args.camera_path)
@@ -195,6 +227,8 @@ def cmd_upscale(args: argparse.Namespace) -> int:
         if scale != args.scale:
             raise InputError(model, f"the model upscales {scale}x, not {args.scale}x (--scale)")
 
+    for part in stale_parts(out / "summary.md"):  # left by a killed run
+        part.unlink(missing_ok=True)
     summaries = []
     for item in inputs:
         summary = batch.InputSummary(item.name, item.source or "phantom")
@@ -205,6 +239,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
             volume = load_volume_argument(argparse.Namespace(volume=item.source, series=args.series,
                                                              resample=args.resample))
             tf = choose_transfer_function(volume, args.preset, args.tf, args.tf_name, args.range)
+            check_sample_distance(args.sample_distance, volume)
             caster = RayCaster(volume, tf, sample_distance=args.sample_distance, background=args.background,
                                device=args.device)
             cameras = cameras_for(args, caster, n_default=24)
@@ -212,11 +247,11 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                 variant, model = batch.auto_variant(caster, cameras[0], args.size, args.scale, device=args.device)
             pipeline = Pipeline(volume, tf, model, scale=args.scale, size=args.size, variant=variant,
                                 device=args.device, sample_distance=args.sample_distance, background=args.background)
-            for path in videos.values():
-                path.parent.mkdir(parents=True, exist_ok=True)
             batch.upscale_cameras(pipeline, cameras, out / item.name, video=videos.get(item.name), fps=args.fps,
                                   side_by_side_panels=args.side_by_side, reference_spp=args.reference_spp,
                                   summary=summary)
+        except OutputError:  # the outputs cannot be written: the other inputs would fail the same way
+            raise
         except Exception as err:  # one bad input must not stop the others; Ctrl-C still stops the batch
             summary.error = (str(err) if isinstance(err, VolSRError)
                              else f"{summary.source}: {type(err).__name__}: {' '.join(str(err).split())}")
@@ -231,6 +266,13 @@ def cmd_upscale(args: argparse.Namespace) -> int:
         fh.write(batch.summary_markdown(summaries, args.scale, Path(str(model)).name if model is not None else "-"))
     print(f"  summary: {out / 'summary.md'}")
     return 1 if failed else 0
+
+
+def shipped_variants() -> str:
+    """What resources/models ships, as --help says it: "M 4x, S 4x, S 8x"."""
+    from volsr_core.runtime.models import shipped_models
+
+    return ", ".join(f"{e['variant']} {e['scale']}x" for e in shipped_models()) or "none"
 
 
 def add_upscale_parser(sub) -> None:
@@ -252,54 +294,59 @@ def add_upscale_parser(sub) -> None:
     up.add_argument("--tf-name", metavar="NAME", help="which entry of a presets file --tf names")
     up.add_argument("--range", type=parse_range, default="auto", metavar="auto|none|LO,HI",
                     help="place the transfer function's design range (as for volsr render) [auto]")
-    up.add_argument("--scale", type=int, default=4, help="upscaling factor of the model [4]")
+    up.add_argument("--scale", type=number(low=2, high=16, integer=True), default=4,
+                    help="upscaling factor of the model [4]")
     up.add_argument("--size", type=parse_size, default=(1024, 1024), metavar="W[xH]", help="output size [1024]")
     path = up.add_mutually_exclusive_group()
     path.add_argument("--camera-path", metavar="FILE", help="camera path JSON (vtkCamera terms)")
-    path.add_argument("--orbit", type=int, metavar="N", help="N frames orbiting the volume (360 degrees) [24]")
-    up.add_argument("--degrees", type=float, metavar="DEG", help="orbit DEG degrees per frame instead of one full "
+    path.add_argument("--orbit", type=AT_LEAST_1, metavar="N", help="N frames orbiting the volume (360 degrees) [24]")
+    up.add_argument("--degrees", type=DEGREES, metavar="DEG", help="orbit DEG degrees per frame instead of one full "
                     "turn over the frames (temporal methods need small steps, as when a user drags)")
-    up.add_argument("--elevation", type=float, default=0.0, metavar="DEG", help="elevation of the orbit, degrees [0]")
-    up.add_argument("--out", required=True, metavar="DIR", help="folder; frames go to DIR/<input name>/")
+    up.add_argument("--elevation", type=ELEVATION, default=0.0, metavar="DEG",
+                    help="elevation of the orbit, degrees [0]")
+    up.add_argument("--out", required=True, metavar="DIR", help="folder; frames go to DIR/<input name>/, whose "
+                    "frame_NNNN.png files from an earlier run are deleted first (the folder never mixes runs; other "
+                    "files stay), as are temporary files a killed run left")
     up.add_argument("--video", metavar="FILE.mp4|DIR", help="also write an H.264 MP4 (volsr[video]); several inputs: "
                     "<input name>.mp4 beside FILE.mp4 or in DIR")
-    up.add_argument("--fps", type=float, default=24.0, help="frame rate of the MP4 [24]")
+    up.add_argument("--fps", type=number("frames per second", 0, 240, low_open=True), default=24.0,
+                    help="frame rate of the MP4 [24]")
     up.add_argument("--side-by-side", action="store_true",
                     help="three labelled panels per frame: native full-size 1-spp render | bilinear upscaling of the "
                     "LR frame (VTK's ImageSampleDistance) | VolSR")
-    up.add_argument("--reference-spp", type=int, default=0, metavar="N",
+    up.add_argument("--reference-spp", type=AT_LEAST_0, default=0, metavar="N",
                     help="also render each frame natively with N jittered samples per pixel and print the PSNR of "
                     "VolSR and bilinear against it (slow) [0: off]")
     up.add_argument("--model", metavar="FILE", help="model file, .onnx (onnxruntime) or .pt (PyTorch); default: the "
                     "shipped model of --variant at --scale")
     up.add_argument("--variant", choices=("S", "M", "L", "auto"), default="S",
-                    help="shipped model size [S]; " + AUTO_VARIANT_RULE)
+                    help=f"shipped model size [S]; shipped: {shipped_variants()}; " + AUTO_VARIANT_RULE)
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                     help="where rays are cast and the network runs [cpu]")
-    up.add_argument("--sample-distance", type=float, metavar="MM", help="ray step, mm [half the smallest spacing]")
-    up.add_argument("--background", type=lambda s: tuple(float(v) for v in s.split(",")), default=(0.0, 0.0, 0.0),
+    up.add_argument("--sample-distance", type=MILLIMETRES, metavar="MM",
+                    help=f"ray step, mm, down to 1/{MAX_SAMPLES_PER_VOXEL} of the smallest spacing "
+                    "[half the smallest spacing]")
+    up.add_argument("--background", type=parse_rgb, default=(0.0, 0.0, 0.0),
                     metavar="R,G,B", help="background colour in [0, 1] [0,0,0]")
     up.set_defaults(run=cmd_upscale)
 
 
 # -- volsr bench ----------------------------------------------------------------------------------
 def parse_int_list(text: str) -> list[int]:
-    """'2,4,8' -> [2, 4, 8]."""
+    """'2,4,8' -> [2, 4, 8]: positive integers."""
     try:
         values = [int(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
-    if not values:
-        raise argparse.ArgumentTypeError(f"expected at least one integer, got {text!r}")
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers >= 1, got {text!r}")
     return values
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
     from volsr_core.apps.bench import report, run
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "exists and is not a folder")
+    out = output_folder(args.out)
     results = run.run_benchmark(
         args.volumes, args.size, frames=args.frames, degrees=args.degrees, warmup=args.warmup,
         reference_spp=args.reference_spp, spp=args.native_spp, factors=args.factors, scales=args.scales,
@@ -335,11 +382,11 @@ def add_bench_parser(sub) -> None:
     b.add_argument("--size", type=parse_size, default=(512, 512), metavar="W[xH]",
                    help="output size; divisible by every --scales [512]")
     b.add_argument("--out", required=True, metavar="DIR", help="folder for bench.json, bench.md and bench.png")
-    b.add_argument("--frames", type=int, default=12, metavar="N", help="frames of the camera orbit [12]")
-    b.add_argument("--degrees", type=float, default=2.0, metavar="DEG", help="orbit step per frame, degrees [2]")
-    b.add_argument("--warmup", type=int, default=4, metavar="N",
+    b.add_argument("--frames", type=AT_LEAST_1, default=12, metavar="N", help="frames of the camera orbit [12]")
+    b.add_argument("--degrees", type=DEGREES, default=2.0, metavar="DEG", help="orbit step per frame, degrees [2]")
+    b.add_argument("--warmup", type=AT_LEAST_0, default=4, metavar="N",
                    help="first frames left out of quality and time (history builds up, kernels compile) [4]")
-    b.add_argument("--reference-spp", type=int, default=16, metavar="N",
+    b.add_argument("--reference-spp", type=AT_LEAST_1, default=16, metavar="N",
                    help="jittered samples per pixel of the ground truth [16]")
     b.add_argument("--spp", dest="native_spp", type=parse_int_list, default=[1, 2, 4], metavar="N,..",
                    help="samples per pixel of the native full-size renderings [1,2,4]")
@@ -351,7 +398,7 @@ def add_bench_parser(sub) -> None:
     b.add_argument("--models-dir", metavar="DIR",
                    help="folder of .onnx models (export_onnx) to use instead of the shipped ones; scale and variant "
                    "come from each model's metadata")
-    b.add_argument("--threads", type=int, default=2, metavar="N", help="onnxruntime intra-op threads [2]")
+    b.add_argument("--threads", type=AT_LEAST_1, default=2, metavar="N", help="onnxruntime intra-op threads [2]")
     b.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                    help="where rays are cast and the network runs [cpu]")
     b.set_defaults(run=cmd_bench)
@@ -379,20 +426,25 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--size", type=parse_size, default=(512, 512), metavar="W[xH]", help="image size [512]")
     path = render.add_mutually_exclusive_group()
     path.add_argument("--camera-path", metavar="FILE", help="camera path JSON (vtkCamera terms)")
-    path.add_argument("--orbit", type=int, metavar="N", help="N frames orbiting the volume (azimuth, 360 degrees)")
-    render.add_argument("--degrees", type=float, metavar="DEG",
+    path.add_argument("--orbit", type=AT_LEAST_1, metavar="N",
+                      help="N frames orbiting the volume (azimuth, 360 degrees)")
+    render.add_argument("--degrees", type=DEGREES, metavar="DEG",
                         help="orbit DEG degrees per frame instead of one full turn over the frames")
-    render.add_argument("--elevation", type=float, default=0.0, metavar="DEG",
+    render.add_argument("--elevation", type=ELEVATION, default=0.0, metavar="DEG",
                         help="elevation of the default anterior view, degrees [0]")
-    render.add_argument("--spp", type=int, default=1, metavar="N", help="jittered samples per pixel (Halton 2,3) [1]")
+    render.add_argument("--spp", type=AT_LEAST_1, default=1, metavar="N",
+                        help="jittered samples per pixel (Halton 2,3) [1]")
     render.add_argument("--taa", action="store_true",
                         help="temporal anti-aliasing over the frames: one Halton-jittered ray per pixel and frame, "
                         "history reprojected with the motion vectors and clamped to the 3x3 neighbourhood")
-    render.add_argument("--sample-distance", type=float, metavar="MM", help="ray step, mm [half the smallest spacing]")
-    render.add_argument("--background", type=lambda s: tuple(float(v) for v in s.split(",")), default=(0.0, 0.0, 0.0),
+    render.add_argument("--sample-distance", type=MILLIMETRES, metavar="MM",
+                        help=f"ray step, mm, down to 1/{MAX_SAMPLES_PER_VOXEL} of the smallest spacing "
+                        "[half the smallest spacing]")
+    render.add_argument("--background", type=parse_rgb, default=(0.0, 0.0, 0.0),
                         metavar="R,G,B", help="background colour in [0, 1] [0,0,0]")
     render.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="where rays are cast [cpu]")
-    render.add_argument("--out", required=True, metavar="DIR_OR_PNG", help="folder for frame_NNNN.png, or one .png")
+    render.add_argument("--out", required=True, metavar="DIR_OR_PNG", help="folder for frame_NNNN.png, or one .png "
+                        "file (PNG only: another image extension is refused)")
     render.add_argument("--features", action="store_true",
                         help="also write frame_NNNN.npz with colour, alpha, depth, max-alpha RGBA, position, motion "
                         "(of the 1-spp pass)")
@@ -424,17 +476,28 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def os_error_line(err: OSError) -> str:
+    """An OSError that reached the top as one line naming its file: a refused write in the words of
+    :func:`~volsr_core.errors.write_error`, any other as the system says it."""
+    if err.filename is not None and err.errno in WRITE_ERRNOS:
+        return str(write_error(err.filename, err))
+    reason = err.strerror or " ".join(str(err).split()) or type(err).__name__
+    return reason if err.filename is None else f"{err.filename}: {reason}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if getattr(args, "spp", 1) < 1:
-        parser.error("--spp must be at least 1")
-    if getattr(args, "orbit", None) is not None and args.orbit < 1:
-        parser.error("--orbit must be at least 1")
     try:
         return args.run(args)
     except VolSRError as err:
         print(f"volsr: error: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:  # a file or folder the system refused (permission, read-only, full) outside atomic writes
+        print(f"volsr: error: {os_error_line(err)}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("volsr: error: out of memory; try a smaller --size or a smaller volume", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("volsr: interrupted", file=sys.stderr)

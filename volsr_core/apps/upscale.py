@@ -10,12 +10,15 @@
   (:func:`choose_variant` is the rule).
 
 Every PNG and MP4 is written atomically (a temporary name in the same folder, then a rename), so
-an interrupted run leaves complete files or none.
+an interrupted run leaves complete files or none; the next run into the same folder deletes what a
+killed one left (its temporary files) and the frames of the run before it (:func:`clear_previous_run`),
+so a frame folder never mixes runs.
 """
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import statistics
 import time
 from dataclasses import dataclass, field
@@ -24,6 +27,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from volsr_core.atomic import stale_parts
 from volsr_core.images import mp4_writer, side_by_side, to_uint8, write_png
 from volsr_core.runtime.methods import Method, Native, ReducedSize, VolSR
 
@@ -242,6 +246,20 @@ def summary_markdown(summaries: Sequence[InputSummary], scale: int, model: str) 
     return "\n".join(lines) + "\n"
 
 
+FRAME_NAME = re.compile(r"frame_\d{4,}\.png")
+
+
+def clear_previous_run(out_dir: Path, video: Path | None = None) -> list[Path]:
+    """Delete what an earlier run left where this one writes: the ``frame_NNNN.png`` files in ``out_dir``
+    (other files stay), and the temporary files of frames and of ``video`` that a killed run left. Returns
+    what was deleted."""
+    old = [p for p in out_dir.glob("frame_*.png") if FRAME_NAME.fullmatch(p.name)] if out_dir.is_dir() else []
+    old += stale_parts(out_dir / "frame_*.png") + (stale_parts(video) if video is not None else [])
+    for path in old:
+        path.unlink(missing_ok=True)
+    return old
+
+
 def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, video: str | os.PathLike | None = None,
                     fps: float = 24.0, side_by_side_panels: bool = False, reference_spp: int = 0,
                     summary: InputSummary | None = None, progress: bool = True,
@@ -252,7 +270,8 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
     ``reference_spp`` > 0: PSNR (skimage) of VolSR and bilinear (and native 1 spp when rendered)
     against an N-spp native render of the same camera. ``on_frame(i)`` runs after frame i is
     written (a progress hook; an exception from it stops the run like any other, and the MP4 is
-    then not written). Fills and returns ``summary``.
+    then not written). Frames of an earlier run in ``out_dir`` are deleted first
+    (:func:`clear_previous_run`). Fills and returns ``summary``.
     """
     from tqdm import tqdm
 
@@ -261,7 +280,10 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
     if reference_spp:
         from skimage.metrics import peak_signal_noise_ratio
     out_dir = Path(out_dir)
+    clear_previous_run(out_dir, None if video is None else Path(video))
     out_dir.mkdir(parents=True, exist_ok=True)
+    if video is not None:
+        Path(video).parent.mkdir(parents=True, exist_ok=True)
     summary = summary or InputSummary(out_dir.name, "")
     summary.size, summary.low_resolution_size = pipeline.size, pipeline.low_resolution_size
     summary.reference_spp = int(reference_spp)

@@ -1,12 +1,16 @@
 """The on-disk dataset: one HDF5 store per video, its JSON entry, and the manifest (docs/dataset.md).
 
 Stores are written frame by frame into ``.vNNNN.h5.part`` and renamed to ``vNNNN.h5`` when
-whole; JSON files are written atomically. Checksums are ``"sha256:<hex>"`` of each dataset's
-bytes in C order, as stored (frame axis first, so frames are hashed in order as they are written).
+whole; JSON files are written atomically. A write the disk refuses (full, quota, file-size limit)
+stops the store with a one-line OutputError and deletes its ``.part`` file.
+
+Checksums are ``"sha256:<hex>"`` of each dataset's bytes in C order, as stored (frame axis first, so
+frames are hashed in order as they are written).
 """
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 from importlib.resources import files
@@ -17,7 +21,7 @@ import h5py
 import numpy as np
 
 from volsr_core.atomic import atomic_write
-from volsr_core.errors import InputError
+from volsr_core.errors import InputError, write_error
 
 STORE_FORMAT = "volsr-video"
 MANIFEST_FORMAT = "volsr-dataset"
@@ -75,12 +79,40 @@ def create_datasets(h5: h5py.File, layout: Mapping[str, tuple[tuple, np.dtype]])
             h5.create_dataset(name, shape=shape, dtype=dtype)
 
 
+class GuardedFile(io.FileIO):
+    """The file HDF5 writes a store through: it keeps the first error of a write the disk refuses in
+    :attr:`error` and from then on drops every write. HDF5 itself never sees the failure, which on a full
+    disk left it in a state that crashed the interpreter at exit (a segfault after hundreds of lines of
+    HDF5 errors); the store is deleted anyway, and its writer raises :attr:`error` as one line."""
+
+    error: OSError | None = None
+
+    def write(self, data) -> int:
+        view = memoryview(data).cast("B")
+        done = 0
+        while self.error is None and done < len(view):  # regular files may take a write in parts
+            try:
+                done += super().write(view[done:])
+            except OSError as err:
+                self.error = err
+        return len(view)
+
+    def truncate(self, size: int | None = None) -> int:
+        if self.error is None:
+            try:
+                return super().truncate(size)
+            except OSError as err:
+                self.error = err
+        return self.tell() if size is None else size
+
+
 class StoreWriter:
     """Writes one video store frame by frame into its ``.part`` file, hashing as it goes.
 
     ``with StoreWriter(path, layout, attrs) as w: w.write_frame(frame_dict) ...``; leaving the
     block normally renames the ``.part`` file to ``path`` (then :attr:`checksums` is set); an
-    exception deletes it. Frames must come in order 0..T-1.
+    exception deletes it. Frames must come in order 0..T-1. Every frame is flushed to disk as it
+    is written, so a full disk stops the store at that frame with an OutputError naming ``path``.
     """
 
     def __init__(self, path: Path, layout: Mapping[str, tuple[tuple, np.dtype]], attrs: Mapping[str, Any]):
@@ -91,12 +123,22 @@ class StoreWriter:
         self._hashes = {name: hashlib.sha256() for name in self.layout}
         self._next = 0
         self.checksums: dict[str, str] = {}
-        self._h5 = h5py.File(self.part, "w")
-        self._h5.attrs.update(dict(attrs))
-        create_datasets(self._h5, self.layout)
+        self._h5: h5py.File | None = None
+        try:
+            self._file = GuardedFile(self.part, "w+")
+        except OSError as err:
+            raise write_error(self.path, err) from None
+        try:
+            self._h5 = h5py.File(self._file, "w")
+            self._h5.attrs.update(dict(attrs))
+            create_datasets(self._h5, self.layout)
+            self._flush()
+        except BaseException:
+            self._discard()
+            raise
 
     def write_frame(self, frame: Mapping[str, np.ndarray]) -> None:
-        """Store one frame of every dataset (converted to the stored dtype)."""
+        """Store one frame of every dataset (converted to the stored dtype) and flush it to disk."""
         if self._next >= self.frames:
             raise ValueError(f"{self.path.name}: all {self.frames} frames are written")
         for name, (shape, dtype) in self.layout.items():
@@ -104,17 +146,35 @@ class StoreWriter:
             self._h5[name][self._next] = value
             self._hashes[name].update(value.tobytes())
         self._next += 1
+        self._flush()
+
+    def _flush(self) -> None:
+        """Flush HDF5's buffers to the file; OutputError naming the store when the disk refused a write."""
+        self._h5.flush()
+        if self._file.error is not None:
+            raise write_error(self.path, self._file.error)
+
+    def _discard(self) -> None:
+        """Close everything and delete the ``.part`` file."""
+        if self._h5 is not None:
+            self._h5.close()
+        self._file.close()
+        self.part.unlink(missing_ok=True)
 
     def __enter__(self) -> "StoreWriter":
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        self._h5.close()
         if exc_type is not None or self._next != self.frames:
-            self.part.unlink(missing_ok=True)
+            self._discard()
             if exc_type is None:
                 raise ValueError(f"{self.path.name}: only {self._next} of {self.frames} frames were written")
             return
+        self._h5.close()
+        self._file.close()
+        if self._file.error is not None:
+            self.part.unlink(missing_ok=True)
+            raise write_error(self.path, self._file.error)
         os.replace(self.part, self.path)
         self.checksums = {name: "sha256:" + h.hexdigest() for name, h in self._hashes.items()}
 

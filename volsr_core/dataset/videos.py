@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import io
 import re
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -30,7 +31,7 @@ import h5py
 import numpy as np
 
 from volsr_core import __version__
-from volsr_core.errors import InputError
+from volsr_core.errors import InputError, OutputError
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.camera_paths import candidate_pool, random_start, smooth_random_path
@@ -280,6 +281,17 @@ def _compression(layout: dict[str, tuple[tuple, np.dtype]], frame: dict[str, np.
     return len(buffer.getvalue()) / raw_bytes(layout)
 
 
+def check_free_space(out: Path, config: DatasetConfig, todo: list[VideoPlan], measured: Measurement) -> None:
+    """OutputError naming ``out`` when its file system has less free space than the videos to render are
+    expected to take (gzip-compressed, as :func:`measure` found on one frame)."""
+    need = len(todo) * raw_bytes(store_layout(config.frames_per_video, config.hr_size, config.scales))
+    need *= measured.compression
+    free = shutil.disk_usage(out).free
+    if need > free:
+        raise OutputError(out, f"not enough free space: {len(todo)} videos need about {_size(need)}, "
+                          f"{_size(free)} is free")
+
+
 def _size(n_bytes: float) -> str:
     for unit, factor in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
         if n_bytes >= factor:
@@ -334,6 +346,8 @@ def generate(config: DatasetConfig, out: str | Path, shard: tuple[int, int] = (0
     source = load_dataset_volume(config, todo[0].volume_index, device) if todo else None
     measured = measure(config, source, camera_path(config, source, todo[0])) if source else None
     log(plan_text(config, plans, mine, todo, shard, measured, source.name if source else "", device))
+    if measured is not None:
+        check_free_space(out, config, todo, measured)
     started = time.perf_counter()
     with tqdm(total=len(todo) * config.frames_per_video, unit="frame", desc="dataset", disable=not progress,
               file=sys.stderr) as bar:

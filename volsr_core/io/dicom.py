@@ -27,6 +27,12 @@ from volsr_core.io.sniff import check_content, is_dicom_file
 
 #: Relative deviation of a slice gap from the median gap that still counts as uniform.
 GAP_TOLERANCE = 0.01
+#: A gap at least this many median gaps wide has slices missing: resampling fills them.
+FILLED_GAP = 1.5
+#: MediaStorageSOPClassUID of a DICOMDIR: a DICOM file that rightly has no SeriesInstanceUID.
+DICOMDIR_SOP_CLASS = "1.2.840.10008.1.3.10"
+#: Notes of what ``resample`` repaired start with these (:func:`repair_notes`).
+REPAIR_PREFIXES = ("resampled ", "skipped ")
 _REQUIRED_TAGS = ("Rows", "Columns", "PixelSpacing", "ImagePositionPatient", "ImageOrientationPatient")
 
 
@@ -68,8 +74,14 @@ def list_dicom_series(path: str | os.PathLike) -> list[SeriesInfo]:
     or a folder without DICOM files.
     """
     folder, _, recursive = _locate(Path(path))
-    groups, _ = _scan(folder, recursive, source=path)
+    groups, _, damaged = _scan(folder, recursive, source=path)
+    _refuse_damaged(damaged, resample_hint=False)
     return _series_infos(groups)
+
+
+def repair_notes(notes: list[str]) -> list[str]:
+    """The notes of a record that say what ``resample`` repaired: damaged files skipped, slices filled."""
+    return [note for note in notes if note.startswith(REPAIR_PREFIXES)]
 
 
 def read_dicom(path: str | os.PathLike, series_uid: str | None = None, resample: bool = False) -> VolumeRecord:
@@ -77,12 +89,17 @@ def read_dicom(path: str | os.PathLike, series_uid: str | None = None, resample:
 
     ``path`` is a folder (searched with its subfolders) or one file of the series (its folder is
     searched, not recursively, and its own series is taken). Without ``series_uid`` the series
-    with the most files is taken. Non-uniform slice spacing raises InputError unless
-    ``resample`` is set, which interpolates linearly to the median slice gap.
+    with the most files is taken. Non-uniform slice spacing, and a damaged file (a header or
+    pixel data cut short, a ``.dcm`` file without a DICOM header), raise InputError naming it
+    unless ``resample`` is set, which skips damaged files and interpolates linearly to the median
+    slice gap; the notes then say which files were skipped and which slices were filled
+    (:func:`repair_notes`).
     """
     path = Path(path)
     folder, given_file, recursive = _locate(path)
-    groups, ignored = _scan(folder, recursive, source=path)
+    groups, ignored, damaged = _scan(folder, recursive, source=path)
+    if not resample:
+        _refuse_damaged(damaged, resample_hint=True)
     uid = _pick_series(path, groups, series_uid, given_file)
     stack = _sort_slices(path, uid, groups[uid])
     notes = [_series_note(uid, stack.slices)]
@@ -90,16 +107,26 @@ def read_dicom(path: str | os.PathLike, series_uid: str | None = None, resample:
     if ignored:
         notes.append(f"ignored {ignored} non-DICOM or non-image files in {folder}")
     slice_step, uneven = _slice_step(path, stack, resample)
-    volume, rescale_note, units = _read_pixels(stack.slices)
+    volume, rescale_note, units, unreadable = _read_pixels(stack.slices)
     notes.append(rescale_note)
+    if unreadable:
+        damaged += [(stack.slices[k].path, problem) for k, problem in unreadable]
+        if not resample:
+            _refuse_damaged(damaged, resample_hint=True)
+        stack = _without(path, stack, [k for k, _ in unreadable])
+        slice_step, uneven = _slice_step(path, stack, resample)
+    if damaged:
+        notes.append(f"skipped {len(damaged)} damaged file{'s' if len(damaged) != 1 else ''}: "
+                     + "; ".join(f"{file.name} ({problem})" for file, problem in damaged))
     if uneven:
         gaps = np.diff(stack.positions)
         n_before = volume.shape[0]
         volume = _resample_slices(volume, stack.positions, slice_step)
+        filled = _filled_slices(stack, slice_step)
         notes.append(
             f"resampled {n_before} unevenly spaced slices ({gaps.min():.3g}-{gaps.max():.3g} mm apart) to "
             f"{volume.shape[0]} slices {slice_step:.3g} mm apart (the median gap) by linear interpolation "
-            "along the slice normal"
+            "along the slice normal" + (f"; filled {'; '.join(filled)}" if filled else "")
         )
     first = stack.slices[0]
     return VolumeRecord(
@@ -125,24 +152,42 @@ def _locate(path: Path) -> tuple[Path, Path | None, bool]:
     return path.parent, path, False
 
 
-def _scan(folder: Path, recursive: bool, source: str | os.PathLike) -> tuple[dict[str, list[_Header]], int]:
-    """Headers of the DICOM image files under ``folder`` grouped by SeriesInstanceUID, and the
-    number of other files (not DICOM, or DICOM without a series such as a DICOMDIR)."""
+def _scan(folder: Path, recursive: bool,
+          source: str | os.PathLike) -> tuple[dict[str, list[_Header]], int, list[tuple[Path, str]]]:
+    """Headers of the DICOM image files under ``folder`` grouped by SeriesInstanceUID, the number of
+    other files (not DICOM, or a DICOMDIR), and the damaged files with their problem: a header that
+    does not parse, an image without SeriesInstanceUID (cut short), a ``.dcm`` file without the
+    DICOM magic (cut within its first 132 bytes)."""
     files = _files_in(folder, recursive)
     if not files:
         raise InputError(source, "folder is empty" if not any(folder.iterdir()) else "folder holds no files")
     groups: dict[str, list[_Header]] = {}
     ignored = 0
+    damaged: list[tuple[Path, str]] = []
     for file in files:
         if not is_dicom_file(file):
-            ignored += 1
+            if file.suffix.lower() == ".dcm":
+                damaged.append((file, f"named .dcm but without a DICOM header ({file.stat().st_size} bytes; "
+                                      "truncated?)"))
+            else:
+                ignored += 1
             continue
-        ds = _read_header(file)
+        try:
+            ds = _read_header(file)
+        except InputError as err:
+            damaged.append((file, err.problem))
+            continue
         uid = str(ds.get("SeriesInstanceUID", "") or "")
         if not uid:
-            ignored += 1
+            sop_class = str(getattr(ds, "file_meta", {}).get("MediaStorageSOPClassUID", "") or "")
+            if sop_class == DICOMDIR_SOP_CLASS:
+                ignored += 1
+            else:
+                damaged.append((file, "DICOM file without SeriesInstanceUID (a header cut short?)"))
             continue
         groups.setdefault(uid, []).append(_Header(file, ds))
+    if not groups and damaged:
+        _refuse_damaged(damaged, resample_hint=False)
     if not groups:
         example = os.path.relpath(files[0], folder)
         raise InputError(
@@ -150,7 +195,17 @@ def _scan(folder: Path, recursive: bool, source: str | os.PathLike) -> tuple[dic
             f"no DICOM image files found among {len(files)} files (e.g. {example}); "
             "DICOM files carry 'DICM' at byte 128",
         )
-    return groups, ignored
+    return groups, ignored, damaged
+
+
+def _refuse_damaged(damaged: list[tuple[Path, str]], resample_hint: bool) -> None:
+    """InputError naming the first damaged file (and how many more there are), if any."""
+    if not damaged:
+        return
+    file, problem = damaged[0]
+    more = f" ({len(damaged) - 1} more damaged file{'s' if len(damaged) > 2 else ''})" if len(damaged) > 1 else ""
+    hint = "; remove it, or pass resample=True (CLI --resample) to skip it and fill its slice" if resample_hint else ""
+    raise InputError(file, f"{problem}{more}{hint}")
 
 
 def _files_in(folder: Path, recursive: bool) -> list[Path]:
@@ -358,24 +413,25 @@ def _slice_step(source: Path, stack: _Stack, resample: bool) -> tuple[float, boo
     )
 
 
-def _read_pixels(slices: list[_Slice]) -> tuple[np.ndarray, str, str]:
-    """Stack of rescaled slices (float32 (z, y, x)), a note on the rescale, and the units."""
+def _read_pixels(slices: list[_Slice]) -> tuple[np.ndarray, str, str, list[tuple[int, str]]]:
+    """Stack of rescaled slices (float32 (z, y, x)), a note on the rescale, the units, and the slices
+    left out of the stack because their file is damaged, as (index, problem)."""
     volume = np.empty((len(slices), slices[0].rows, slices[0].columns), dtype=np.float32)
     rescales = set()
+    damaged: list[tuple[int, str]] = []
     for k, item in enumerate(slices):
-        ds = _read_full(item.path)
         try:
-            pixels = ds.pixel_array
-        except Exception as err:  # pydicom raises many types for bad pixel data
-            raise InputError(item.path, f"cannot decode the pixel data: {_one_line(err)}") from None
-        if pixels.shape != volume.shape[1:]:
-            raise InputError(
-                item.path, f"pixel data has shape {pixels.shape}, expected {volume.shape[1:]} (Rows, Columns)"
-            )
+            ds = _read_full(item.path)
+            pixels = _pixels(item.path, ds, volume.shape[1:])
+        except InputError as err:
+            damaged.append((k, err.problem))
+            continue
         slope = _rescale(item.path, ds, "RescaleSlope", 1.0)
         intercept = _rescale(item.path, ds, "RescaleIntercept", 0.0)
         rescales.add((slope, intercept))
         volume[k] = pixels.astype(np.float64) * slope + intercept
+    if damaged:
+        volume = np.delete(volume, [k for k, _ in damaged], axis=0)
     units = _units(slices[0].ds)
     if len(rescales) == 1:
         slope, intercept = rescales.pop()
@@ -383,7 +439,44 @@ def _read_pixels(slices: list[_Slice]) -> tuple[np.ndarray, str, str]:
         note = f"values = stored * {slope:g} {sign} {abs(intercept):g} (RescaleSlope, RescaleIntercept)"
     else:
         note = f"per-slice RescaleSlope/RescaleIntercept applied ({len(rescales)} different pairs)"
-    return volume, note + (f" -> {units}" if units else ""), units
+    return volume, note + (f" -> {units}" if units else ""), units, damaged
+
+
+def _pixels(path: Path, ds: Dataset, shape: tuple[int, ...]) -> np.ndarray:
+    """A slice's stored pixel values, of ``shape`` (Rows, Columns); InputError naming the file otherwise."""
+    try:
+        pixels = ds.pixel_array
+    except Exception as err:  # pydicom raises many types for bad pixel data
+        raise InputError(path, f"cannot decode the pixel data: {_one_line(err)}") from None
+    if pixels.shape != shape:
+        raise InputError(path, f"pixel data has shape {pixels.shape}, expected {shape} (Rows, Columns)")
+    return pixels
+
+
+def _without(source: Path, stack: _Stack, dropped: list[int]) -> _Stack:
+    """``stack`` less the slices at the ``dropped`` indices; InputError when fewer than 2 remain."""
+    keep = [k for k in range(len(stack.slices)) if k not in set(dropped)]
+    if len(keep) < 2:
+        raise InputError(source, f"only {len(keep)} readable slice{'s' if len(keep) != 1 else ''} in the series; "
+                         "a volume needs at least 2")
+    return _Stack([stack.slices[k] for k in keep], stack.positions[keep], stack.direction, stack.pixel_spacing)
+
+
+def _filled_slices(stack: _Stack, step: float) -> list[str]:
+    """Which slices of the resampled stack (index ``k`` at ``positions[0] + k * step``) lie in a gap of
+    at least FILLED_GAP steps, i.e. stand where no slice was: "slices 40-41 between A.dcm and B.dcm (4.5 mm gap)"."""
+    filled = []
+    for i, gap in enumerate(np.diff(stack.positions)):
+        if gap < FILLED_GAP * step:
+            continue
+        start = stack.positions[i] - stack.positions[0]
+        first, last = int(np.floor(start / step + 0.5)) + 1, int(np.ceil((start + gap) / step - 0.5)) - 1
+        if last < first:
+            continue
+        which = f"slice {first}" if first == last else f"slices {first}-{last}"
+        filled.append(f"{which} between {stack.slices[i].path.name} and {stack.slices[i + 1].path.name} "
+                      f"({gap:.3g} mm gap)")
+    return filled
 
 
 def _read_full(file: Path) -> Dataset:

@@ -14,7 +14,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from volsr_core.errors import InputError
+from volsr_core.errors import InputError, require_extra
 from volsr_core.sr.history import stand_in_history
 
 METADATA_KEY = "volsr.network"  # the ONNX metadata entry holding the NetworkConfig as JSON
@@ -24,6 +24,7 @@ PROVIDER_ORDER = ("TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExec
 def choose_providers(available: Sequence[str] | None = None) -> list[str]:
     """The execution providers to use, best first: TensorRT, CUDA, CPU, those present."""
     if available is None:
+        require_extra("onnxruntime", "running an ONNX model")
         import onnxruntime as ort
 
         available = ort.get_available_providers()
@@ -51,6 +52,7 @@ class OnnxEngine:
 
     def __init__(self, path: str | os.PathLike, providers: Sequence[str] | None = None, fp16: bool = False,
                  threads: int | None = None):
+        require_extra("onnxruntime", f"{path}: running an ONNX model")
         import onnxruntime as ort
 
         self.path = Path(path)
@@ -95,6 +97,7 @@ class TorchEngine:
     """The PyTorch network behind the same call: numpy in, numpy out, no gradients."""
 
     def __init__(self, model, device: str = "cpu"):
+        require_extra("torch", "running a PyTorch model")
         import torch
 
         self.torch = torch
@@ -127,6 +130,7 @@ def open_engine(model: str | os.PathLike | Any, backend: str = "auto", device: s
         return OnnxEngine(path, providers=providers, fp16=fp16, threads=threads)
     if path.suffix == ".onnx":
         raise InputError(path, "an ONNX model runs in onnxruntime; give the .pt file for --backend torch")
+    require_extra("torch", f"{path}: a PyTorch model file")
     from volsr_core.sr.checkpoint import load_model
 
     return TorchEngine(load_model(path), device)

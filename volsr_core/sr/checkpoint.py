@@ -7,6 +7,7 @@ A model file holds ``{"format": "volsr-model", "version": 1, "network": NetworkC
 from __future__ import annotations
 
 import os
+import pickle
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +47,31 @@ def save_checkpoint(path: str | os.PathLike, model: torch.nn.Module | None = Non
         torch.save(payload, fh)
 
 
+def _sentences(text: str, limit: int = 160) -> str:
+    """The first whole sentences of ``text`` that fit in ``limit`` characters (at least the first one, cut)."""
+    kept = ""
+    for sentence in " ".join(text.split()).replace(". ", ".\n").splitlines():
+        if kept and len(kept) + 1 + len(sentence) > limit:
+            break
+        kept = f"{kept} {sentence}".strip()
+    return kept if len(kept) <= limit else kept[: limit - 3] + "..."
+
+
+def _load_failure(err: Exception) -> str:
+    """Why ``torch.load(weights_only=True)`` refused a file, on one line, without torch's advice to load it
+    unsafely: a file that would run code on loading is refused as such; a damaged one is unreadable."""
+    if isinstance(err, pickle.UnpicklingError):
+        lines = [line.strip() for line in str(err).splitlines() if line.strip()]
+        detail = next((line for line in lines if "GLOBAL" in line), None)
+        if detail is not None:
+            return (f"refused: it holds pickled Python objects that loading would run ({detail.rstrip('.')}); "
+                    "VolSR loads only plain tensors and numbers")
+        detail = next((line for line in lines[1:] if not line.startswith(("Please file", "Check the documentation"))),
+                      lines[-1] if lines else type(err).__name__)
+        return f"not a readable PyTorch checkpoint ({_sentences(detail)})"
+    return f"not a readable PyTorch checkpoint ({type(err).__name__}: {_sentences(str(err))})"
+
+
 def load_checkpoint(path: str | os.PathLike, trusted: bool = False) -> dict[str, Any]:
     """Read a model file or training checkpoint; a corrupt or foreign file is a one-line InputError.
 
@@ -58,8 +84,7 @@ def load_checkpoint(path: str | os.PathLike, trusted: bool = False) -> dict[str,
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # torch raises many types for foreign or damaged files
-        raise InputError(path, f"not a readable PyTorch checkpoint ({type(err).__name__}: "
-                         f"{' '.join(str(err).split())[:160]})") from None
+        raise InputError(path, _load_failure(err)) from None
     if not isinstance(payload, dict):
         raise InputError(path, "not a VolSR model or checkpoint (no mapping inside)")
     if not trusted and payload.get("format") != MODEL_FORMAT:

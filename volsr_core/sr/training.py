@@ -6,13 +6,18 @@ crop and flips with (seed, e, index). A checkpoint holds the model, optimiser, s
 scaler, step and RNG states, so stopping at any checkpoint and resuming reproduces the
 uninterrupted run. Under ``torchrun`` (WORLD_SIZE > 1) each rank takes every world-th sample of
 each global batch and gradients are averaged by DistributedDataParallel (gloo on CPU, NCCL on CUDA).
+
+One trainer per run folder: rank 0 holds ``OUT/train.lock`` while it trains (:func:`run_folder_lock`).
+Resuming takes the newest readable checkpoint: ``last.pt``, else the ``step_*.pt`` files newest first.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import os
 import random
+import sys
 import time
 from pathlib import Path
 from typing import Any, Iterator
@@ -23,7 +28,7 @@ import torch.distributed as dist
 from torch.utils.data import DataLoader, Sampler
 
 from volsr_core.atomic import atomic_write
-from volsr_core.errors import InputError
+from volsr_core.errors import InputError, OutputError
 from volsr_core.sr.checkpoint import load_checkpoint, load_model, save_checkpoint
 from volsr_core.sr.config import TrainingConfig
 from volsr_core.sr.history import history_mode
@@ -33,6 +38,31 @@ from volsr_core.sr.metrics import psnr_ssim
 from volsr_core.sr.network import NetworkConfig, SuperResolutionNet, run_unrolled, upsample_motion, variant_config
 
 LOG_FIELDS = ["step", "epoch", "loss", "lr", "val_psnr", "val_ssim", "seconds"]
+LOCK_NAME = "train.lock"
+
+
+@contextlib.contextmanager
+def run_folder_lock(out: Path) -> Iterator[None]:
+    """Hold ``out/train.lock`` while training into ``out``: an exclusive ``flock``, which the system releases
+    however the process ends (the file stays, holding the last holder's pid). A second trainer on the
+    same folder gets a one-line OutputError naming the lock and the pid that holds it."""
+    import fcntl
+
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / LOCK_NAME
+    with open(path, "a+", encoding="utf-8") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            holder = fh.read().strip() or "unknown"
+            raise OutputError(path, f"another volsr train (pid {holder}) is training into {out}; "
+                              "wait for it to finish or stop it") from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"{os.getpid()}\n")
+        fh.flush()
+        yield
 
 
 class EpochSamples(torch.utils.data.Dataset):
@@ -151,23 +181,56 @@ class Trainer:
                 "config": self.config.to_dict()}
 
     def restore(self, path: Path) -> None:
+        """The training state of checkpoint ``path``; InputError when it is unreadable or incomplete."""
         state = load_checkpoint(path, trusted=True)
-        self.model.load_state_dict(state["model"])
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.scheduler.load_state_dict(state["scheduler"])
-        self.scaler.load_state_dict(state["scaler"])
-        self.step, self.best_psnr = int(state["step"]), float(state["best_psnr"])
-        torch.set_rng_state(state["rng"]["torch"])
-        np.random.set_state(state["rng"]["numpy"])
-        random.setstate(state["rng"]["python"])
+        try:
+            self.model.load_state_dict(state["model"])
+            self.optimizer.load_state_dict(state["optimizer"])
+            self.scheduler.load_state_dict(state["scheduler"])
+            self.scaler.load_state_dict(state["scaler"])
+            self.step, self.best_psnr = int(state["step"]), float(state["best_psnr"])
+            torch.set_rng_state(state["rng"]["torch"])
+            np.random.set_state(state["rng"]["numpy"])
+            random.setstate(state["rng"]["python"])
+        except (KeyError, TypeError, ValueError, RuntimeError) as err:
+            raise InputError(path, f"not a complete training checkpoint of this network "
+                             f"({type(err).__name__}: {' '.join(str(err).split())[:160]})") from None
+
+    def resume(self) -> None:
+        """Restore the newest readable checkpoint in ``out/checkpoints``: ``last.pt``, else the ``step_*.pt``
+        files newest first, saying on stderr which one when it is not ``last.pt``. No checkpoint: step 0;
+        none readable: a one-line InputError."""
+        folder = self.out / "checkpoints"
+        last = folder / "last.pt"
+        unreadable: list[str] = []
+        for path in [last] + sorted(folder.glob("step_*.pt"), reverse=True):
+            if not path.is_file():
+                continue
+            try:
+                self.restore(path)
+            except InputError as err:
+                unreadable.append(str(err))
+                continue
+            if path != last and self.rank == 0:
+                why = "; ".join(unreadable) or f"{last}: missing"
+                print(f"volsr train: {why}; resumed from {path.name} (step {self.step}) instead",
+                      file=sys.stderr)
+            return
+        if unreadable:
+            raise InputError(folder, f"no readable checkpoint to resume from ({'; '.join(unreadable)}); "
+                             "move the folder away to start over")
 
     # -- loop ----------------------------------------------------------------------------------
     def run(self, until: int | None = None) -> dict[str, Any]:
-        """Train from the last checkpoint to ``train.steps`` (or stop after step ``until``, checkpointing)."""
+        """Train from the newest readable checkpoint to ``train.steps`` (or stop after step ``until``,
+        checkpointing), holding the run folder's lock (rank 0)."""
+        with run_folder_lock(self.out) if self.rank == 0 else contextlib.nullcontext():
+            return self._train(until)
+
+    def _train(self, until: int | None) -> dict[str, Any]:
         cfg = self.config.train
         last = self.out / "checkpoints" / "last.pt"
-        if last.exists():
-            self.restore(last)
+        self.resume()
         if self.rank == 0:
             (self.out / "checkpoints").mkdir(parents=True, exist_ok=True)
             self._trim_log()
