@@ -32,7 +32,7 @@ def metrics_table(path: Path) -> list[str]:
 def main() -> None:
     from volsr_core.atomic import atomic_write
     from volsr_core.hashing import file_sha256
-    from volsr_core.runtime.export import export_onnx
+    from volsr_core.runtime.export import OPSET, export_onnx
     from volsr_core.sr.checkpoint import load_model, save_checkpoint
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -73,7 +73,7 @@ def main() -> None:
             f"{cfg.previous_frames} previous frames, inputs {', '.join(cfg.features)}; "
             f"{entry['parameters']:,} parameters. Files: `{pt.name}` ({pt.stat().st_size / 2**20:.2f} MiB, weights "
             f"only, `torch.load(weights_only=True)`), `{onnx_path.name}` ({onnx_path.stat().st_size / 2**20:.2f} MiB, "
-            "opset 17, dynamic height and width). SHA-256 in `models.json`, checked at load.", "",
+            f"opset {OPSET}, dynamic height and width). SHA-256 in `models.json`, checked at load.", "",
             "**Intended use: interactive visualisation (upscaling direct volume renderings while the camera moves). "
             "Not for diagnosis:** the network invents plausible detail that was not rendered, and it was "
             "trained on a handful of volumes.", "",
