@@ -74,7 +74,7 @@ def test_reports_and_target_verdicts(bench_run):
     md = (out / "bench.md").read_text()
     assert "## phantom, CT-Phantom" in md and "| VolSR S 4x |" in md and "| native 1 spp |" in md
     assert "after 1 warm-up frames" in md and "8-spp" in md
-    assert "1. VolSR at 4x reaches at least native 1-spp PSNR" in md and "2. Every VolSR point lies above" in md
+    assert "1. VolSR at 4x reaches at least native 1-spp PSNR" in md and "2. Every VolSR point lies at least" in md
     from PIL import Image
 
     with Image.open(out / "bench.png") as png:
@@ -83,16 +83,16 @@ def test_reports_and_target_verdicts(bench_run):
     # the verdicts, worked out here from the run's own rows by the targets' definitions (docs/performance.md)
     rows = by_label(results)
     native, volsr = rows["native 1 spp"], rows["VolSR S 4x"]
-    fast = volsr["psnr"] >= native["psnr"] and volsr["ms_total"] <= native["ms_total"] / 3
+    fast = volsr["psnr"] >= native["psnr"] and volsr["ms_total"] <= native["ms_total"] / 2
     curve = sorted((r["ms_total"], r["psnr"]) for r in rows.values() if r["method"] == "bilinear" or r is native)
     on_curve = float(np.interp(volsr["ms_total"], [t for t, _ in curve], [p for _, p in curve]))
     targets = results["targets"]["phantom, CT-Phantom on -1024..3071 (auto)"]
     assert targets["fast_4x"]["met"] is fast
-    assert targets["above_bilinear"]["met"] is (volsr["psnr"] > on_curve)
+    assert targets["above_bilinear"]["met"] is (volsr["psnr"] >= on_curve + 0.5)
     assert targets["above_bilinear"]["points"][0]["curve_psnr"] == pytest.approx(on_curve, abs=1e-3)
     verdict = {True: "**met**", False: "**not met**"}
-    assert f"in ≤ 1/3 of its time: {verdict[fast]}" in md
-    assert f"at equal time: {verdict[volsr['psnr'] > on_curve]}" in md
+    assert f"in ≤ 1/2 of its time: {verdict[fast]}" in md
+    assert f"at equal time: {verdict[volsr['psnr'] >= on_curve + 0.5]}" in md
 
 
 def test_pareto_front_on_hand_made_points():
@@ -118,12 +118,14 @@ def row(method, label, ms, psnr, scale=1, spp=1):
 def test_targets_from_hand_made_rows():
     base = [row("native", "native 1 spp", 90.0, 30.0), row("native", "native 4 spp", 360.0, 36.0, spp=4),
             row("bilinear", "1/2", 30.0, 26.0, 2), row("bilinear", "1/4", 10.0, 22.0, 4)]
-    good = row("volsr", "VolSR S 4x", 25.0, 31.0, 4)
-    slow = row("volsr", "VolSR L 4x", 40.0, 33.0, 4)
-    weak = row("volsr", "VolSR S 8x", 20.0, 24.0, 8)  # curve at 20 ms: 24 dB; not above it
-    t = check_targets(base + [good, slow])["v"]
-    assert t["fast_4x"]["met"] is True and t["fast_4x"]["budget_ms"] == pytest.approx(30.0)
-    assert [p["met"] for p in t["fast_4x"]["points"]] == [True, False]  # L is too slow for the budget
+    good = row("volsr", "VolSR S 4x", 25.0, 31.0, 4)  # in a third of native's 90 ms
+    half = row("volsr", "VolSR M 4x", 40.0, 33.0, 4)  # in half, not in a third
+    slow = row("volsr", "VolSR L 4x", 50.0, 33.0, 4)  # over half
+    weak = row("volsr", "VolSR S 8x", 20.0, 24.0, 8)  # curve at 20 ms: 24 dB; not 0.5 dB above it
+    t = check_targets(base + [good, half, slow])["v"]
+    assert t["fast_4x"]["met"] is True and t["fast_4x"]["budget_ms"] == pytest.approx(45.0)
+    assert [p["met"] for p in t["fast_4x"]["points"]] == [True, True, False]  # L is too slow for the budget
+    assert [p["within_third"] for p in t["fast_4x"]["points"]] == [True, False, False]
     assert t["above_bilinear"]["met"] is True
     assert t["above_bilinear"]["points"][1]["curve_psnr"] == pytest.approx(30.0 - 4.0 * 50 / 60, abs=1e-3)
     t = check_targets(base + [slow, weak])["v"]
@@ -137,16 +139,19 @@ def test_targets_from_hand_made_rows():
 
 
 def test_targets_at_their_boundaries_and_per_scene():
-    """Equal PSNR at exactly a third of the time meets target 1; a point exactly on the curve misses target 2."""
+    """Equal PSNR at exactly half the time meets target 1; a point exactly 0.5 dB above the curve meets
+    target 2, one just under it does not."""
     base = [row("native", "native 1 spp", 90.0, 30.0), row("bilinear", "1/2", 30.0, 26.0, 2),
             row("bilinear", "1/4", 10.0, 22.0, 4)]
-    edge = row("volsr", "VolSR S 4x", 30.0, 30.0, 4)  # 30 dB in 30 ms: the budget, the native PSNR
-    on_curve = row("volsr", "VolSR S 8x", 20.0, 24.0, 8)  # the curve at 20 ms: 24 dB
-    t = check_targets(base + [edge, on_curve])["v"]
+    edge = row("volsr", "VolSR S 4x", 45.0, 30.0, 4)  # 30 dB in 45 ms: the budget, the native PSNR
+    on_margin = row("volsr", "VolSR S 2x", 20.0, 24.5, 2)  # the curve at 20 ms is 24 dB: 0.5 above
+    on_curve = row("volsr", "VolSR S 8x", 20.0, 24.49, 8)  # 0.49 above
+    t = check_targets(base + [edge, on_margin, on_curve])["v"]
     assert [p["met"] for p in t["fast_4x"]["points"]] == [True] and t["fast_4x"]["met"] is True
-    assert [p["met"] for p in t["above_bilinear"]["points"]] == [True, False] and t["above_bilinear"]["met"] is False
-    assert t["above_bilinear"]["points"][1]["margin_db"] == pytest.approx(0.0)
-    just_slow = {**edge, "scene": "w", "ms_total": 30.001}
+    assert [p["met"] for p in t["above_bilinear"]["points"]] == [True, True, False]  # edge: 30 dB, curve 27 dB
+    assert t["above_bilinear"]["met"] is False
+    assert t["above_bilinear"]["points"][1]["margin_db"] == pytest.approx(0.5)
+    just_slow = {**edge, "scene": "w", "ms_total": 45.001}
     just_weak = {**edge, "scene": "w", "label": "VolSR M 4x", "psnr": 29.999}
     other = [{**r, "scene": "w"} for r in base] + [just_slow, just_weak]
     both = check_targets(base + [edge] + other)
