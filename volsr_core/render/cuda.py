@@ -1,15 +1,19 @@
 """The ray-cast kernel for CUDA (numba-cuda): the same ray program as the CPU, one thread per pixel.
 
-Importing this module needs ``numba.cuda`` (the ``numba-cuda`` package). Set
-``NUMBA_ENABLE_CUDASIM=1`` before importing numba to run it in Numba's CUDA simulator (slow:
-tiny images only), which is how CI checks it on machines without a GPU.
+Importing this module needs ``numba.cuda`` (the ``numba-cuda`` package; ``pip install 'volsr[cuda]'``
+pins a combination that imports). Set ``NUMBA_ENABLE_CUDASIM=1`` before importing numba to run it in
+Numba's CUDA simulator (slow: tiny images only), which is how CI checks it on machines without a GPU.
 """
 from __future__ import annotations
 
 import numpy as np
-from numba import cuda
 
-from volsr_core.render.stages import build_ray_program
+if not hasattr(np, "row_stack"):  # NumPy >= 2.5 removed it; numba-cuda <= 0.30 still overloads it at import
+    np.row_stack = np.vstack
+
+from numba import cuda  # noqa: E402
+
+from volsr_core.render.stages import build_ray_program  # noqa: E402
 
 march_ray = build_ray_program(cuda.jit(device=True, inline=True))
 
