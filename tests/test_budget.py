@@ -82,3 +82,18 @@ def test_a_still_camera_refines_to_the_native_supersampled_image(scene):
     assert ours >= four - 1.0
     renderer.render(cameras[0])
     assert renderer.state.level != "still" and renderer.state.still_samples == 0, "a move ends the refinement"
+
+
+def test_volsr_upscale_budget_ms_draws_every_frame_within_the_levels(tmp_path):
+    from PIL import Image
+
+    from volsr_core.cli import main
+    from volsr_core.runtime.models import shipped_models
+
+    assert shipped_models(), "the budget mode chooses among the shipped models"
+    out = tmp_path / "up"
+    assert main(["upscale", "--orbit", "3", "--degrees", "2", "--size", "64", "--budget-ms", "5", "--out",
+                 str(out)]) == 0
+    pngs = sorted((out / "phantom").glob("frame_*.png"))
+    assert len(pngs) == 3 and np.asarray(Image.open(pngs[0])).shape == (64, 64, 3)
+    assert main(["upscale", "--budget-ms", "5", "--model", "x.onnx", "--out", str(out)]) == 2

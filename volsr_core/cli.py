@@ -219,8 +219,10 @@ def cmd_upscale(args: argparse.Namespace) -> int:
         get_preset(args.preset)
     variant, model = args.variant, None
     if args.model:
+        if args.budget_ms is not None:
+            raise InputError(args.model, "--budget-ms chooses among the shipped models; give it without --model")
         model = Path(args.model)
-    elif variant != "auto":
+    elif variant != "auto" and args.budget_ms is None:
         model = model_file(variant, args.scale)
     if model is not None:
         scale = open_engine(model, device=args.device).config.scale
@@ -243,13 +245,20 @@ def cmd_upscale(args: argparse.Namespace) -> int:
             caster = RayCaster(volume, tf, sample_distance=args.sample_distance, background=args.background,
                                device=args.device)
             cameras = cameras_for(args, caster, n_default=24)
-            if model is None:  # --variant auto, decided once at the first input that loads
-                variant, model = batch.auto_variant(caster, cameras[0], args.size, args.scale, device=args.device)
-            pipeline = Pipeline(volume, tf, model, scale=args.scale, size=args.size, variant=variant,
-                                device=args.device, sample_distance=args.sample_distance, background=args.background)
+            if args.budget_ms is not None:  # the level per frame: the shipped models and native
+                from volsr_core.runtime.budget import BudgetRenderer
+
+                pipeline = BudgetRenderer(volume, tf, args.budget_ms, size=args.size, device=args.device,
+                                          sample_distance=args.sample_distance, background=args.background)
+            else:
+                if model is None:  # --variant auto, decided once at the first input that loads
+                    variant, model = batch.auto_variant(caster, cameras[0], args.size, args.scale, device=args.device)
+                pipeline = Pipeline(volume, tf, model, scale=args.scale, size=args.size, variant=variant,
+                                    device=args.device, sample_distance=args.sample_distance,
+                                    background=args.background)
             batch.upscale_cameras(pipeline, cameras, out / item.name, video=videos.get(item.name), fps=args.fps,
                                   side_by_side_panels=args.side_by_side, reference_spp=args.reference_spp,
-                                  summary=summary)
+                                  summary=summary, bilinear_scale=args.scale)
         except OutputError:  # the outputs cannot be written: the other inputs would fail the same way
             raise
         except Exception as err:  # one bad input must not stop the others; Ctrl-C still stops the batch
@@ -321,6 +330,12 @@ def add_upscale_parser(sub) -> None:
                     "shipped model of --variant at --scale")
     up.add_argument("--variant", choices=("S", "M", "L", "auto"), default="S",
                     help=f"shipped model size [S]; shipped: {shipped_variants()}; " + AUTO_VARIANT_RULE)
+    up.add_argument("--budget-ms", type=number("ms per frame", 0, 60000, low_open=True), metavar="MS",
+                    help="frame-budget mode: per moving frame, the finest of native full size and the shipped models "
+                    "(smaller scale, then larger variant first) whose measured time fits MS (each timed once on the "
+                    "first camera, then tracked frame by frame, as VTK's AutoAdjustSampleDistances does); a camera "
+                    "that holds still refines instead, one more full-size jittered sample per frame (after N still "
+                    "frames: the native N-spp image); --scale then only sets the bilinear panel's size")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                     help="where rays are cast and the network runs [cpu]")
     up.add_argument("--sample-distance", type=MILLIMETRES, metavar="MM",

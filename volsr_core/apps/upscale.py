@@ -263,10 +263,12 @@ def clear_previous_run(out_dir: Path, video: Path | None = None) -> list[Path]:
 def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, video: str | os.PathLike | None = None,
                     fps: float = 24.0, side_by_side_panels: bool = False, reference_spp: int = 0,
                     summary: InputSummary | None = None, progress: bool = True,
-                    on_frame: Callable[[int], None] | None = None) -> InputSummary:
-    """Render every camera through ``pipeline`` to ``out_dir/frame_NNNN.png`` (and ``video``, an MP4).
+                    on_frame: Callable[[int], None] | None = None, bilinear_scale: int | None = None) -> InputSummary:
+    """Render every camera through ``pipeline`` (a :class:`~volsr_core.runtime.pipeline.Pipeline` or a
+    :class:`~volsr_core.runtime.budget.BudgetRenderer`) to ``out_dir/frame_NNNN.png`` (and ``video``, an MP4).
 
-    ``side_by_side_panels``: each frame shows native 1 spp | bilinear | VolSR, labelled.
+    ``side_by_side_panels``: each frame shows native 1 spp | bilinear (from 1/``bilinear_scale`` size,
+    default the pipeline's scale) | VolSR, labelled.
     ``reference_spp`` > 0: PSNR (skimage) of VolSR and bilinear (and native 1 spp when rendered)
     against an N-spp native render of the same camera. ``on_frame(i)`` runs after frame i is
     written (a progress hook; an exception from it stops the run like any other, and the MP4 is
@@ -291,7 +293,7 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
     caster = pipeline.caster  # the same volume, transfer function, step and background as the LR frames
     methods: dict[str, Method] = {"VolSR": VolSR(pipeline)}
     if side_by_side_panels or reference_spp:
-        methods["bilinear"] = ReducedSize(caster, pipeline.size, pipeline.scale, "bilinear")
+        methods["bilinear"] = ReducedSize(caster, pipeline.size, bilinear_scale or pipeline.scale, "bilinear")
     if side_by_side_panels:
         methods["native 1 spp"] = Native(caster, pipeline.size, 1)
     with contextlib.ExitStack() as stack:

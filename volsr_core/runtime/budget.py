@@ -73,7 +73,9 @@ class BudgetRenderer:
 
     Every level is timed once on the first camera before the first frame (kernels compile, sessions
     warm up), which seeds the estimates. ``render(camera)`` returns float32 (H, W, 3) in [0, 1];
-    ``state`` says what the frame was.
+    ``state`` says what the frame was. Like a :class:`Pipeline` it has ``size``, ``scale`` and
+    ``low_resolution_size`` (the level drawn last; 1 and ``size`` while still), ``caster``,
+    ``last_timings`` and ``last_low_resolution``, so the batch and the comparison methods take it.
     """
 
     def __init__(self, volume: Volume, transfer_function: TransferFunction, budget_ms: float, *,
@@ -101,9 +103,22 @@ class BudgetRenderer:
         self.estimates: dict[Level, float] = {}
         self.current: Level | None = None
         self.state = BudgetState()
+        self.last_timings: dict[str, float] = {}
+        self.last_low_resolution = None
         self._last_camera: Camera | None = None
         self._still_sum: np.ndarray | None = None
         self._still_count = 0
+
+    @property
+    def scale(self) -> int:
+        """The scale of the level drawn last (1 before the first frame and while still)."""
+        return 1 if self.current is None or self.state.level == "still" else self.current.scale
+
+    @property
+    def low_resolution_size(self) -> tuple[int, int]:
+        if self.scale == 1:
+            return self.size
+        return self.pipelines[self.current].low_resolution_size
 
     # timing ----------------------------------------------------------------------------------------
     def _calibrate(self, camera: Camera) -> None:
@@ -162,6 +177,11 @@ class BudgetRenderer:
             self.current = level
             image, label = self._render_level(level, camera), level.label
         ms = 1000.0 * (time.perf_counter() - started)
+        pipeline = self.pipelines.get(self.current) if label != "still" else None
+        if pipeline is not None:
+            self.last_timings, self.last_low_resolution = dict(pipeline.last_timings), pipeline.last_low_resolution
+        else:
+            self.last_timings, self.last_low_resolution = {"render_ms": ms, "network_ms": 0.0, "total_ms": ms}, None
         if label != "still":
             previous = self.estimates[self.current]
             self.estimates[self.current] = (1.0 - self.smoothing) * previous + self.smoothing * ms
