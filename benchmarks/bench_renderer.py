@@ -58,7 +58,7 @@ def peak_memory_ratio(volume: Volume, tf, camera: Camera, size: int, step: float
 
 def bench_scene(path: Path, preset: str, value_range, sizes, repeats: int,
                 diagonal_steps: int | None) -> list[dict]:
-    from vtk_scene import VtkVolumeRenderer
+    from volsr_core.hosts.vtk_reference import VtkVolumeRenderer
 
     volume = Volume.load(path)
     tf = get_preset(preset).placed_on(*value_range)

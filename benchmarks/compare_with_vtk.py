@@ -15,7 +15,7 @@ import numpy as np
 from PIL import Image
 
 from volsr_core.atomic import atomic_write
-from vtk_scene import VtkVolumeRenderer
+from volsr_core.hosts.vtk_reference import VtkVolumeRenderer
 from volsr_core.io import make_phantom
 from volsr_core.render import RayCaster
 from volsr_core.scene import Camera, Volume, get_preset

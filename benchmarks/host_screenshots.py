@@ -52,7 +52,7 @@ def save_png(pixels: np.ndarray, path: Path) -> None:
 def vtk_screenshot(volume, tf, model, size, frames: int) -> np.ndarray:
     from volsr_core.hosts.vtk_adapter import VolSRPostProcess
     from volsr_core.scene.vtk_bridge import read_window
-    from vtk_scene import VtkVolumeRenderer
+    from volsr_core.hosts.vtk_reference import VtkVolumeRenderer
     from volsr_core.scene.vtk_bridge import apply_camera
     from volsr_core.scene import Camera
 

@@ -202,3 +202,19 @@ def test_bad_settings_give_one_line_errors(tmp_path):
     assert main(["bench", "--size", "60", "--scales", "8", "--out", str(tmp_path / "b")]) == 2
     assert main(["bench", "--size", "64", "--spp", "16", "--out", str(tmp_path / "b")]) == 2
     assert main(["bench", "--size", "64", "--frames", "2", "--warmup", "2", "--out", str(tmp_path / "b")]) == 2
+
+
+def test_vtk_row_is_vtks_own_mapper_in_the_same_run(tmp_path):
+    pytest.importorskip("vtkmodules.vtkRenderingVolumeOpenGL2")
+    pytest.importorskip("skimage")
+    from volsr_core.cli import main
+
+    out = tmp_path / "b"
+    assert main(["bench", "--size", "32", "--frames", "2", "--warmup", "1", "--reference-spp", "2", "--spp", "1",
+                 "--factors", "2", "--scales", "2", "--variants", "", "--vtk", "fixed_point", "--out", str(out)]) == 0
+    rows = by_label(json.loads((out / "bench.json").read_text()))
+    vtk, native = rows["VTK CPU mapper"], rows["native 1 spp"]
+    assert vtk["method"] == "vtk" and vtk["ms_total"] > 0 and vtk["ms_network"] == 0
+    assert vtk["psnr"] > 15, "VTK draws the same volume, framing and look (not identical: another renderer)"
+    assert abs(vtk["psnr"] - native["psnr"]) < 25
+    assert "| VTK CPU mapper |" in (out / "bench.md").read_text()

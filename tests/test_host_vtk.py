@@ -47,7 +47,7 @@ def ct_avm(ct_avm_path):
 
 def scene(volume, tf):
     """A plain VTK scene (vtkGPUVolumeRayCastMapper, fixed sampling) looking at the volume from the front."""
-    from benchmarks.vtk_scene import VtkVolumeRenderer
+    from volsr_core.hosts.vtk_reference import VtkVolumeRenderer
     from volsr_core.scene.vtk_bridge import apply_camera
 
     host = VtkVolumeRenderer(volume, tf, W, H)

@@ -20,7 +20,7 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def compare(volume: Volume, tf, direction) -> float:
-    from benchmarks.vtk_scene import VtkVolumeRenderer
+    from volsr_core.hosts.vtk_reference import VtkVolumeRenderer
 
     camera = Camera.framing(volume.bounds, direction=direction).zoom(1.5).reset_clipping_range(volume.bounds)
     ours = RayCaster(volume, tf).render(camera, W, H).color

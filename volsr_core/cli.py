@@ -366,7 +366,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         args.volumes, args.size, frames=args.frames, degrees=args.degrees, warmup=args.warmup,
         reference_spp=args.reference_spp, spp=args.native_spp, factors=args.factors, scales=args.scales,
         variants=[v.strip().upper() for v in args.variants.split(",") if v.strip()], models_dir=args.models_dir,
-        preset=args.preset, placement=args.range, threads=args.threads, device=args.device)
+        preset=args.preset, placement=args.range, threads=args.threads, device=args.device, vtk=args.vtk)
     written = report.write_outputs(results, out)
     for scene, targets in results["targets"].items():
         print(f"{scene}:")
@@ -416,6 +416,9 @@ def add_bench_parser(sub) -> None:
     b.add_argument("--threads", type=AT_LEAST_1, default=2, metavar="N", help="onnxruntime intra-op threads [2]")
     b.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                    help="where rays are cast and the network runs [cpu]")
+    b.add_argument("--vtk", choices=("gpu", "fixed_point"),
+                   help="also VTK's own mapper at full size (vtkGPUVolumeRayCastMapper through EGL on the GPU, or "
+                   "its CPU ray caster): the host's renderer, timed in the same run")
     b.set_defaults(run=cmd_bench)
 
 

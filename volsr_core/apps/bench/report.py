@@ -17,7 +17,7 @@ import numpy as np
 from volsr_core.atomic import atomic_write
 from volsr_core.errors import InputError
 
-METHOD_ORDER = ("native", "bilinear", "taau", "volsr")
+METHOD_ORDER = ("native", "bilinear", "taau", "volsr", "vtk")
 TARGET_SCALE = 4              # target 1: VolSR at 4x reaches native 1-spp PSNR ...
 TARGET_TIME_FRACTION = 1 / 2  # ... in at most this fraction of native 1-spp time
 STRETCH_TIME_FRACTION = 1 / 3  # the earlier, stricter goal, still reported
@@ -187,7 +187,7 @@ def plot(results: dict[str, Any], path: str | os.PathLike) -> Path:
     cols = min(3, max(1, len(scenes)))
     n_rows = math.ceil(len(scenes) / cols) if scenes else 1
     fig, axes = plt.subplots(n_rows, cols, figsize=(5.2 * cols, 4.2 * n_rows), squeeze=False)
-    styles = {"native": ("o", "C0"), "bilinear": ("s", "C1"), "taau": ("^", "C2")}
+    styles = {"native": ("o", "C0"), "bilinear": ("s", "C1"), "taau": ("^", "C2"), "vtk": ("D", "C7")}
     volsr_colours = {"S": "C3", "M": "C4", "L": "C5"}
     for ax, scene in zip(axes.flat, scenes):
         mine = [r for r in _sorted_rows(results["rows"]) if r["scene"] == scene
@@ -201,13 +201,13 @@ def plot(results: dict[str, Any], path: str | os.PathLike) -> Path:
         seen = set()
         for r in mine:
             marker, colour = styles.get(r["method"], ("*", volsr_colours.get(r["variant"], "C6")))
-            name = {"native": "native", "bilinear": "native reduced + bilinear", "taau": "TAAU"}.get(
-                r["method"], f"VolSR {r['variant']}")
+            name = {"native": "native", "bilinear": "native reduced + bilinear", "taau": "TAAU",
+                    "vtk": r["label"]}.get(r["method"], f"VolSR {r['variant']}")
             ax.plot(r["ms_total"], r["psnr"], marker, color=colour, ms=9 if r["method"] == "volsr" else 6,
                     label=None if name in seen else name)
             seen.add(name)
-            short = {"native": f"{r['spp']} spp", "bilinear": f"1/{r['scale']}", "taau": f"{r['scale']}x"}.get(
-                r["method"], f"{r['variant']} {r['scale']}x")
+            short = {"native": f"{r['spp']} spp", "bilinear": f"1/{r['scale']}", "taau": f"{r['scale']}x",
+                     "vtk": "VTK"}.get(r["method"], f"{r['variant']} {r['scale']}x")
             ax.annotate(short, (r["ms_total"], r["psnr"]), textcoords="offset points", xytext=(4, 3), fontsize=7)
         front = [mine[i] for i in pareto_front([r["ms_total"] for r in mine], [r["psnr"] for r in mine])]
         if front:

@@ -113,9 +113,9 @@ def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[
 
 def build_methods(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int], spp: Sequence[int] = SPP,
                   factors: Sequence[int] = FACTORS, scales: Sequence[int] = SCALES, models: Sequence[ModelSpec] = (),
-                  threads: int | None = 2, device: str = "cpu") -> list[Method]:
+                  threads: int | None = 2, device: str = "cpu", vtk: str | None = None) -> list[Method]:
     """Fresh methods (with their state: TAAU histories, VolSR pipelines) for one volume; native, bilinear
-    and TAAU share ``caster``."""
+    and TAAU share ``caster``; ``vtk`` ("gpu", "fixed_point") adds VTK's own mapper at full size."""
     methods: list[Method] = [Native(caster, size, int(n)) for n in spp]
     methods += [ReducedSize(caster, size, int(f), "bilinear") for f in factors]
     methods += [Taau(caster, size, int(s)) for s in scales]
@@ -126,6 +126,10 @@ def build_methods(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int,
             pipeline = Pipeline(bench_volume.volume, bench_volume.transfer_function, spec.path, scale=spec.scale,
                                 size=size, device=device, threads=threads)
             methods.append(VolSR(pipeline, spec.variant, spec.path.name))
+    if vtk is not None:
+        from volsr_core.hosts.vtk_reference import VtkMethod
+
+        methods.append(VtkMethod(bench_volume.volume, bench_volume.transfer_function, size, vtk))
     return methods
 
 
@@ -200,7 +204,7 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
                   spp: Sequence[int] = SPP, factors: Sequence[int] = FACTORS, scales: Sequence[int] = SCALES,
                   variants: Sequence[str] = VARIANTS, models_dir: str | os.PathLike | None = None,
                   preset: str | None = None, placement: str | tuple[float, float] = "auto", threads: int | None = 2,
-                  device: str = "cpu", progress: bool = True) -> dict[str, Any]:
+                  device: str = "cpu", progress: bool = True, vtk: str | None = None) -> dict[str, Any]:
     """Benchmark every volume (specs, :func:`~volsr_core.apps.bench.scenes.parse_volume_spec`; none: the phantom).
 
     Returns ``{"settings", "machine", "models", "rows", "targets"}`` (what bench.json holds).
@@ -218,13 +222,13 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
     specs = list(volumes) if volumes else [None]
     models = find_models(models_dir, variants, scales)
     volumes_ = [load_bench_volume(spec, preset, placement) for spec in specs]
-    n_methods = len(spp) + len(factors) + len(scales) + len(models)
+    n_methods = len(spp) + len(factors) + len(scales) + len(models) + (vtk is not None)
     rows: list[dict[str, Any]] = []
     with tqdm(total=len(volumes_) * frames * (1 + n_methods), desc="bench", unit="render", disable=not progress) as bar:
         for bench_volume in volumes_:
             bar.set_postfix_str(bench_volume.name)
             caster = RayCaster(bench_volume.volume, bench_volume.transfer_function, device=device, start_jitter="ign")
-            methods = build_methods(bench_volume, caster, size, spp, factors, scales, models, threads, device)
+            methods = build_methods(bench_volume, caster, size, spp, factors, scales, models, threads, device, vtk)
             cameras = orbit_around(caster.visible_bounds(), frames, degrees, aspect=size[0] / size[1])
             rows += bench_one(bench_volume, caster, size, methods, cameras, reference_spp, warmup, bar)
 
@@ -232,7 +236,7 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
                 "measured_frames": frames - warmup, "reference_spp": reference_spp, "spp": list(spp),
                 "factors": list(factors), "scales": list(scales), "variants": [v.upper() for v in variants],
                 "models_dir": None if models_dir is None else str(models_dir), "onnxruntime_threads": threads,
-                "numba_threads": numba.get_num_threads(), "device": device}
+                "numba_threads": numba.get_num_threads(), "device": device, "vtk": vtk}
     machine = {"python": platform.python_version(), "platform": platform.platform(),
                "processor": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
                "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,

@@ -1,19 +1,22 @@
 """The same scene drawn by VTK's own volume mappers, offscreen: the reference VolSR is held to.
 
-Used by the renderer benchmarks and by the tests that compare VolSR's renderer with VTK's. VTK comes
-through :mod:`volsr_core._vtk` (``vtkmodules``; offscreen windows use EGL unless
+The host's own renderer: the tests compare VolSR's ray caster with it, the renderer benchmarks time
+it, and ``volsr bench --vtk`` adds it as a row (what a VTK application would draw at full size). VTK
+comes through :mod:`volsr_core._vtk` (``vtkmodules``; offscreen windows use EGL unless
 ``VTK_DEFAULT_OPENGL_WINDOW`` says else).
 """
 from __future__ import annotations
 
+import time
 from typing import Sequence
 
 import numpy as np
 
+from volsr_core._vtk import vtkMatrix4x4, vtkRenderer, vtkRenderWindow, vtkVolume
+from volsr_core.runtime.methods import Method, MethodFrame
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
-from volsr_core._vtk import vtkMatrix4x4, vtkRenderer, vtkRenderWindow, vtkVolume
 from volsr_core.scene.vtk_bridge import (
     apply_camera, image_data, placement_matrix, read_window, to_vtk_volume_property, volume_mapper,
 )
@@ -67,3 +70,25 @@ class VtkVolumeRenderer:
 
     def close(self) -> None:
         self.window.Finalize()
+
+
+class VtkMethod(Method):
+    """A comparison method (:mod:`volsr_core.runtime.methods`): VTK's own ``mapper`` drawing the volume at
+    full size, one Render() and read-back per frame (what a VTK application shows); ``volsr bench --vtk``."""
+
+    kind = "vtk"
+
+    def __init__(self, volume: Volume, transfer_function: TransferFunction, size: tuple[int, int],
+                 mapper: str = "gpu", background: Sequence[float] = (0.0, 0.0, 0.0)):
+        super().__init__(size)
+        self.mapper = mapper
+        self.renderer = VtkVolumeRenderer(volume, transfer_function, *self.size, mapper=mapper, background=background)
+
+    @property
+    def label(self) -> str:
+        return {"gpu": "VTK GPU mapper", "fixed_point": "VTK CPU mapper"}[self.mapper]
+
+    def __call__(self, camera: Camera) -> MethodFrame:
+        started = time.perf_counter()
+        image = self.renderer.render(camera)
+        return MethodFrame(image, 1000.0 * (time.perf_counter() - started))
