@@ -3,9 +3,10 @@
     python benchmarks/bench_network.py [--scale 4] [--size 512] [--repeats 7]
                                        [--out benchmarks/results/network.json]
 
-Three configurations of each variant S, M, L: the paper's (N = 2 previous frames), recurrent
-(N = 0, the warped previous output as history) and TAAU-based (N = 0, refining TAAU's estimate:
-the shipped models; TAAU itself runs before the network and is timed by `volsr bench`).
+Four configurations of each variant S, M, L: the paper's (N = 2 previous frames), recurrent
+(N = 0, the warped previous output as history), TAAU-based (N = 0, refining TAAU's estimate) and
+TAAU-based with TAAU's side outputs as inputs too (`taau_aux`: the shipped models; TAAU itself runs
+before the network and is timed by `volsr bench`).
 GFLOP from torch.utils.flop_counter (2 per multiply-add, convolutions and matrix products);
 times are medians, 2 threads, batch 1, the LR input of an HR ``size`` frame, the ONNX graph as
 volsr_core.runtime.export writes it.
@@ -30,7 +31,8 @@ from volsr_core.sr.network import SuperResolutionNet, variant_config
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGURATIONS = {"paper (N=2)": {"previous_frames": 2}, "recurrent (N=0)": {"previous_frames": 0, "recurrent": True},
-                  "TAAU-based (N=0)": {"previous_frames": 0, "taau_base": True}}
+                  "TAAU-based (N=0)": {"previous_frames": 0, "taau_base": True},
+                  "TAAU-based + side outputs (N=0)": {"previous_frames": 0, "taau_base": True, "taau_aux": True}}
 
 
 def median_ms(fn, repeats: int) -> float:

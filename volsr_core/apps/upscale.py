@@ -242,7 +242,7 @@ def summary_markdown(summaries: Sequence[InputSummary], scale: int, model: str) 
             lines.append(f"| {s.name} | {s.frames} | {s.size[0]}x{s.size[1]} | {method} | {ms:.1f} | {ratio} | {psnr} |")
     reference = next((s.reference_spp for s in summaries if s.reference_spp), 0)
     if reference:
-        lines += ["", f"PSNR against a {reference}-spp native render of every frame."]
+        lines += ["", f"PSNR against the native render of every frame with {reference} samples per pixel."]
     return "\n".join(lines) + "\n"
 
 

@@ -149,8 +149,8 @@ def markdown_report(results: dict[str, Any]) -> str:
              f"threads, numba {s['numba_threads']} threads, device {s['device']}. "
              f"Machine: {results['machine']['processor']}, {results['machine']['cpu_count']} CPUs, "
              f"{results['machine']['date']}.", "",
-             "Render = ray casting (every feature buffer, motion vectors too); network = what follows it (the "
-             "network for VolSR, the upscaling for bilinear and TAAU); total is the median of the per-frame sums, so "
+             "Render = ray casting (every feature buffer, motion vectors too); network = what follows it (TAAU "
+             "and the network for VolSR, the upscaling for bilinear and TAAU); total is the median of the per-frame sums, so "
              "it need not equal the two medians added. Time and ΔPSNR are relative to native full-size 1-spp "
              "rendering.", ""]
     if not results["models"]:

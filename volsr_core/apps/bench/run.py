@@ -14,8 +14,8 @@ all of them :mod:`volsr_core.runtime.methods`.
 Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per
 pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image). Quality is averaged over the
 frames after ``warmup`` warm-up frames; times are medians over the same frames (the warm-up also
-absorbs kernel compilation). ``ms_render`` is the ray casting, ``ms_network`` what follows it (the
-network for VolSR, the bilinear or TAAU upscaling for those, 0 for native), ``ms_total`` their sum.
+absorbs kernel compilation). ``ms_render`` is the ray casting, ``ms_network`` what follows it (TAAU
+and the network for VolSR, the bilinear or TAAU upscaling for those, 0 for native), ``ms_total`` their sum.
 
 :func:`run_benchmark` runs it; :mod:`volsr_core.apps.bench.report` checks the targets
 (docs/performance.md) and writes bench.json, bench.md and bench.png; the volumes come from
