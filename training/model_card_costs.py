@@ -20,9 +20,8 @@ SECTION = "## Cost per frame"
 
 
 def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
-    """The card section for the model whose ONNX file is named ``model_file``, from bench.json files."""
-    from volsr_core.apps.bench.report import curve_psnr_at
-
+    """The card section for the model whose ONNX file is named ``model_file``, from bench.json files (the
+    distance to the curve is the one the run's own target check worked out, ``targets``)."""
     lines = [SECTION, "",
              "Medians over the measured frames of `volsr bench` (ONNX Runtime, CPU, 2 threads, on the project's "
              "2-core machine; the LR render is the ray caster's). \"vs curve\": PSNR minus that of native "
@@ -39,9 +38,8 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
             native = next((r for r in rows if r["method"] == "native" and r["spp"] == 1), None)
             if mine is None or native is None:
                 continue
-            curve = [native] + [r for r in rows if r["method"] == "bilinear"]
-            margin = mine["psnr"] - curve_psnr_at([r["ms_total"] for r in curve], [r["psnr"] for r in curve],
-                                                  mine["ms_total"])
+            points = bench["targets"][scene]["above_bilinear"]["points"]
+            margin = next(p["margin_db"] for p in points if p["label"] == mine["label"])
             lines.append(f"| {run} | {mine['volume']} | {mine['ms_render']:.1f} | {mine['ms_network']:.1f} | "
                          f"{mine['ms_total']:.1f} | {mine['psnr']:.2f} | {margin:+.2f} | "
                          f"{native['psnr']:.2f} dB in {native['ms_total']:.1f} ms |")

@@ -150,9 +150,9 @@ def markdown_report(results: dict[str, Any]) -> str:
              f"Machine: {results['machine']['processor']}, {results['machine']['cpu_count']} CPUs, "
              f"{results['machine']['date']}.", "",
              "Render = ray casting (every feature buffer, motion vectors too); network = what follows it (TAAU "
-             "and the network for VolSR, the upscaling for bilinear and TAAU); total is the median of the per-frame sums, so "
-             "it need not equal the two medians added. Time and ΔPSNR are relative to native full-size 1-spp "
-             "rendering.", ""]
+             "and the network for VolSR, the upscaling for bilinear and TAAU); total is the median of the per-frame "
+             "sums, so it need not equal the two medians added. Time and ΔPSNR are relative to native full-size "
+             "1-spp rendering.", ""]
     if not results["models"]:
         lines += ["No VolSR model was benchmarked (no shipped model for the chosen variants and scales, and no "
                   "`--models-dir`).", ""]
