@@ -194,3 +194,14 @@ def test_dict_round_trip_is_exact_and_orthogonalises_once():
     assert again.to_dict() == camera.to_dict()
     assert abs(float(camera.view_up @ camera.direction_of_projection)) < 1e-12
     assert np.linalg.norm(camera.view_up) == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("name", CAMERAS)
+def test_pixel_size_at_focus_is_what_a_step_on_the_focal_plane_projects_to(name):
+    camera = CAMERAS[name]
+    right, up, _ = camera.basis()
+    width, height = 300, 200
+    size = camera.pixel_size_at_focus(height)
+    for axis in (right, up):
+        step = camera.world_to_pixel(np.stack([camera.focal_point, camera.focal_point + size * axis]), width, height)
+        assert np.linalg.norm(step[1] - step[0]) == pytest.approx(1.0, rel=1e-9)

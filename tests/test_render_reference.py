@@ -156,3 +156,16 @@ def test_sphere_silhouette_lands_where_projection_predicts():
     rendered = frame.alpha > 0.5
     assert predicted.sum() > 500
     assert not np.any((rendered != predicted) & ~margin), "silhouette pixels off the predicted disc"
+
+
+def test_a_frame_knows_how_many_pixels_a_voxel_spans_at_the_focal_point():
+    """The oblique volume's smallest spacing (0.9 mm) against the pixel size on the focal plane; ``zoom``
+    scales it, and so does the image size."""
+    volume = oblique_volume()
+    caster = RayCaster(volume, shaded_tf())
+    camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.2), view_up=(0, 0, 1))
+    frame = caster.render(camera, 40, 30)
+    assert frame.pixels_per_voxel == pytest.approx(0.9 / camera.pixel_size_at_focus(30), rel=1e-12)
+    assert caster.render(camera.zoom(2.0), 40, 30).pixels_per_voxel == pytest.approx(
+        0.9 / camera.zoom(2.0).pixel_size_at_focus(30), rel=1e-12)
+    assert caster.render(camera, 80, 60).pixels_per_voxel == pytest.approx(2 * frame.pixels_per_voxel, rel=1e-12)

@@ -31,13 +31,16 @@ class FeatureFrame:
       backward-warps. Zero when no previous camera was given. The point reprojected is the one
       ``RayCaster.motion_depth`` chooses (where the opacity reaches 0.5, by default);
     - ``motion_depth`` (H, W): quasi-depth (as ``depth``) of that point; 1 for background;
-    - ``jitter``: the sub-pixel offset (pixels, +y down) every ray was shifted by.
+    - ``jitter``: the sub-pixel offset (pixels, +y down) every ray was shifted by;
+    - ``pixels_per_voxel``: how many of this frame's pixels the volume's smallest voxel spacing spans
+      at the focal point (None when unknown): how finely the frame samples the volume's detail.
     """
 
     data: np.ndarray
     camera: Camera
     jitter: tuple[float, float] = (0.0, 0.0)
     previous_camera: Camera | None = None
+    pixels_per_voxel: float | None = None
 
     def __post_init__(self) -> None:
         if self.data.ndim != 3 or self.data.shape[2] != OUT_CHANNELS:

@@ -181,4 +181,5 @@ class RayCaster:
             from volsr_core.render.cpu import render_cpu
             render_cpu(self.volume.array, self._empty, t.rgba, t.gradient_opacity, cam, self._w2i, self._grad_w,
                        params, np.ascontiguousarray(prev_vp), out)
-        return FeatureFrame(out, camera, jitter, previous_camera)
+        voxel = float(min(self.volume.spacing))
+        return FeatureFrame(out, camera, jitter, previous_camera, voxel / camera.pixel_size_at_focus(height))

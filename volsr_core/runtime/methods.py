@@ -161,10 +161,12 @@ class Taau(Method):
         self.previous = None
 
     def upscale(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
-                depth: np.ndarray | None = None, rotation: float | None = None) -> np.ndarray:
+                depth: np.ndarray | None = None, rotation: float | None = None,
+                pixels_per_voxel: float | None = None) -> np.ndarray:
         """The accumulation stage alone: one jittered LR frame (colour, motion, jitter, the reprojected
-        point's depth, the view's rotation in degrees since the last frame) in, (H, W, 3) out."""
-        return self.upsampler(colour, motion, jitter, depth, rotation)
+        point's depth, the view's rotation in degrees since the last frame, the frame's pixels per
+        voxel) in, (H, W, 3) out."""
+        return self.upsampler(colour, motion, jitter, depth, rotation, pixels_per_voxel)
 
     def __call__(self, camera: Camera) -> MethodFrame:
         width, height = self.size
@@ -173,7 +175,8 @@ class Taau(Method):
         lr = self.caster.render(camera, width // self.scale, height // self.scale, jitter=jitter,
                                 previous_camera=self.previous, seed=self.frame)
         rendered = time.perf_counter()
-        image = self.upscale(lr.color, lr.motion, lr.jitter, lr.motion_depth, view_rotation(camera, self.previous))
+        image = self.upscale(lr.color, lr.motion, lr.jitter, lr.motion_depth, view_rotation(camera, self.previous),
+                             lr.pixels_per_voxel)
         self.frame += 1
         self.previous = camera
         return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered), lr)

@@ -87,6 +87,13 @@ class Camera:
         d = self.focal_point - self.position
         return d / np.linalg.norm(d)
 
+    def pixel_size_at_focus(self, height: int) -> float:
+        """mm one pixel of an image ``height`` pixels tall spans on the plane through the focal point
+        (square pixels: the projection scales x and y alike)."""
+        if self.parallel_projection:
+            return 2.0 * self.parallel_scale / height
+        return 2.0 * self.distance * math.tan(math.radians(self.view_angle) / 2.0) / height
+
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Orthonormal (right, up, forward) in world coordinates; forward = direction of projection."""
         forward = self.direction_of_projection

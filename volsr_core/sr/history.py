@@ -42,7 +42,8 @@ def pick_history(mode: str, previous_output: Any, taau_estimate: Any) -> Any:
 
 def taau_upsampler(scale: int) -> TemporalUpsampler:
     """The TAAU a TAAU-based network refines, its settings chosen here for training data, evaluation and
-    the runtime alike (a network sees at run time the TAAU it was trained on)."""
+    the runtime alike (a network sees at run time the TAAU it was trained on). Networks feed it no
+    ``pixels_per_voxel`` (the dataset does not record it), so theirs never smooths (docs/temporal.md)."""
     return TemporalUpsampler(scale)
 
 

@@ -1,14 +1,20 @@
 """Temporal upsampling (TAAU): jittered low-resolution frames accumulated into a sharper high-resolution one.
 
 The design holds up under camera motion; it was chosen by measurement (docs/temporal.md, "TAAU under
-motion"): against a 16-spp reference at 512², it beats the unjittered reduced-size render + bilinear
-upscale at 2x and 4x on every test volume at 2 and 5 degrees of orbit per frame, and converges on a
-still camera. Per HR pixel:
+motion" and "Fine sampling"): against a 16-spp reference at 512² and 1024², it beats the unjittered
+reduced-size render + bilinear upscale at 2x and 4x on every benchmark volume at 2 and 5 degrees of
+orbit per frame (at 1024² and 5° by 0.00-0.27 dB), and converges on a still camera. Per HR pixel:
 
 1. **Current estimate**: the 2x2 LR samples around the HR pixel centre, weighted by a Gaussian
    of their distance (``sigma`` LR px while the view rotates, ``still_sigma_hr`` HR px without
    rotation, ``static_sigma_hr`` when nothing moves at all), normalised; the sum of
    the weights is the estimate's confidence ``a`` (about 1 where a sample landed on the pixel).
+   Where the output samples the volume finely (the LR frame's ``pixels_per_voxel`` times the scale:
+   output pixels across the smallest voxel spacing, above ``smooth_between[0]``) and the view
+   rotates, the frame is smooth at the pixel scale: the splat's weights are blended with bilinear
+   ones, by up to ``smooth_tent`` at ``smooth_between[1]`` and beyond, and the history cap (step 6)
+   shrinks by up to the factor ``smooth_count``: bilinear interpolation of such a frame is nearly
+   exact, while the history (re-projected under rotation) is not.
 2. **Motion**: the nearest LR sample's vector (not interpolated: bilinear motion smears
    foreground and background vectors across silhouettes).
 3. **History**: Catmull-Rom fetch of the HR history (RGB), bilinear accumulated weight ``n``.
@@ -23,8 +29,9 @@ still camera. Per HR pixel:
    ``rotation`` the view's rotation since the last frame (degrees): shading (headlight) and the
    parallax of semi-transparent layers change the image with the view direction, so history ages
    by rotation, not by pixel motion. Without rotation (a still camera, a pan, a zoom) the cap is
-   ``still_count`` and the splat narrows, so the image converges towards the supersampled one; when
-   nothing moves at all the clamp of step 5 is skipped too (it would stop the convergence).
+   ``still_count`` and the splat narrows (no bilinear blend), so the image converges towards the
+   supersampled one; when nothing moves at all the clamp of step 5 is skipped too (it would stop the
+   convergence).
 7. ``out = (n * history + a * estimate) / (n + a)``; the new history keeps ``min(n + a, cap)``
    and the pixel's depth (nearest sample's ``motion_depth``).
 
@@ -76,8 +83,8 @@ def _prepass(lr, motion, scale, dis_motion, box):
 
 
 @numba.njit(**_NB)
-def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, cap, disocclusion, rectify,
-         out, new_history, aux):
+def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, tent, cap, disocclusion,
+         rectify, out, new_history, aux):
     hr_h, hr_w = out.shape[0], out.shape[1]
     lr_h = lr.shape[0]
     v = (y + 0.5) / scale - 0.5 - jy
@@ -95,10 +102,18 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s
         x1 = int(cols[x, 2])
         wx0 = cols[x, 3]
         wx1 = cols[x, 4]
-        # 1. the current estimate: 2x2 Gaussian splat
+        # 1. the current estimate: 2x2 Gaussian splat, blended with bilinear weights by ``tent``
         w00, w01, w10, w11 = wy0 * wx0, wy0 * wx1, wy1 * wx0, wy1 * wx1
         a = w00 + w01 + w10 + w11
         inv = 1.0 / a
+        if tent > 0.0:
+            fx = cols[x, 5]
+            keep = (1.0 - tent) * inv
+            w00 = keep * w00 + tent * (1.0 - dy0) * (1.0 - fx)
+            w01 = keep * w01 + tent * (1.0 - dy0) * fx
+            w10 = keep * w10 + tent * dy0 * (1.0 - fx)
+            w11 = keep * w11 + tent * dy0 * fx
+            inv = 1.0
         e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
         e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
         e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
@@ -184,23 +199,25 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s
 
 
 @numba.njit(parallel=True, cache=True)
-def _kernel(history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, cap, disocclusion, rectify, out,
-            new_history, aux):
+def _kernel(history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, tent, cap, disocclusion, rectify,
+            out, new_history, aux):
     for y in numba.prange(out.shape[0]):
-        _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, cap, disocclusion, rectify, out,
-             new_history, aux)
+        _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, tent, cap, disocclusion, rectify,
+             out, new_history, aux)
 
 
 def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> np.ndarray:
-    """Per HR column: nearest LR sample, the 2x2 window's two columns and their Gaussian weights."""
+    """Per HR column: nearest LR sample, the 2x2 window's two columns, their Gaussian weights and the
+    fractional position between them (the bilinear weight of the second)."""
     u = (np.arange(hr_w) + 0.5) / scale - 0.5 - jx
-    cols = np.empty((hr_w, 5), dtype=np.float64)
+    cols = np.empty((hr_w, 6), dtype=np.float64)
     cols[:, 0] = np.clip(np.floor(u + 0.5), 0, lr_w - 1)
     f = np.floor(u)
     cols[:, 1] = np.clip(f, 0, lr_w - 1)
     cols[:, 2] = np.clip(f + 1, 0, lr_w - 1)
     cols[:, 3] = np.exp(-(u - f) ** 2 * inv2s2)
     cols[:, 4] = np.exp(-(u - f - 1) ** 2 * inv2s2)
+    cols[:, 5] = u - f
     return cols
 
 
@@ -219,13 +236,16 @@ class TemporalUpsampler:
     ``max_count / (1 + rotation / cap_angle)`` = scale / (1 + 1.5 * degrees) (``max_count``
     defaults to the scale: 0.5 at 2x and 1 at 4x for a 2 degree/frame orbit), 16 on a still camera
     with the narrower splats, disocclusion at 0.1 quasi-depth behind where the 3x3 motion spreads
-    more than 0.5 HR px.
+    more than 0.5 HR px; from 1.75 to 2.75 output pixels per voxel the splat turns 0.75 bilinear and
+    the cap falls to a quarter (512² of our 256-voxel volumes is 1.4-1.7, 1024² is 2.8-3.4).
     """
 
     def __init__(self, scale: int, *, sigma: float = 0.35, still_sigma_hr: float = 0.5, static_sigma_hr: float = 0.3,
                  max_count: float | None = None,
                  cap_angle: float = 2.0 / 3.0, still_count: float = 16.0, disocclusion: float = 0.1,
-                 dis_motion: float = 0.5, assumed_rotation: float = 2.0):
+                 dis_motion: float = 0.5, assumed_rotation: float = 2.0,
+                 smooth_between: tuple[float, float] = (1.75, 2.75), smooth_tent: float = 0.75,
+                 smooth_count: float = 0.25):
         if scale < 1 or int(scale) != scale:
             raise ValueError(f"scale must be a positive integer, got {scale}")
         if sigma <= 0 or still_sigma_hr <= 0 or static_sigma_hr <= 0:
@@ -233,11 +253,16 @@ class TemporalUpsampler:
         max_count = float(scale) if max_count is None else max_count
         if max_count <= 0 or cap_angle <= 0 or still_count <= 0:
             raise ValueError("max_count, cap_angle and still_count must be positive")
+        if not 0 < smooth_between[0] < smooth_between[1] or not 0 <= smooth_tent <= 1 or not 0 < smooth_count <= 1:
+            raise ValueError("need 0 < smooth_between[0] < smooth_between[1], smooth_tent in [0, 1] and "
+                             "smooth_count in (0, 1]")
         self.scale = int(scale)
         self.sigma, self.still_sigma_hr, self.static_sigma_hr = float(sigma), float(still_sigma_hr), float(static_sigma_hr)
         self.max_count, self.cap_angle, self.still_count = float(max_count), float(cap_angle), float(still_count)
         self.disocclusion, self.dis_motion = float(disocclusion), float(dis_motion)
         self.assumed_rotation = float(assumed_rotation)
+        self.smooth_between = (float(smooth_between[0]), float(smooth_between[1]))
+        self.smooth_tent, self.smooth_count = float(smooth_tent), float(smooth_count)
         self.history: np.ndarray | None = None  # (H, W, 5): RGB, accumulated weight, depth
         self.last_aux: np.ndarray | None = None  # (H, W, 4) of the last frame: see __call__
         self._spare: np.ndarray | None = None
@@ -248,8 +273,17 @@ class TemporalUpsampler:
         """Forget the history: the next frame gives its 2x2 splat estimate only."""
         self.history = None
 
+    def smoothing(self, pixels_per_voxel: float | None) -> float:
+        """How far towards the smooth settings a rotating frame goes, in [0, 1], for an LR frame with
+        ``pixels_per_voxel`` (None: unknown, 0)."""
+        if pixels_per_voxel is None or not math.isfinite(pixels_per_voxel):
+            return 0.0
+        lo, hi = self.smooth_between
+        return min(max((pixels_per_voxel * self.scale - lo) / (hi - lo), 0.0), 1.0)
+
     def __call__(self, lr_color: np.ndarray, lr_motion: np.ndarray, jitter: tuple[float, float],
-                 depth: np.ndarray | None = None, rotation: float | None = None) -> np.ndarray:
+                 depth: np.ndarray | None = None, rotation: float | None = None,
+                 pixels_per_voxel: float | None = None) -> np.ndarray:
         """Accumulate one LR frame; returns a new (h * scale, w * scale, 3) float32 image.
 
         ``lr_color`` (h, w, 3); ``lr_motion`` (h, w, 2) in LR pixels; ``jitter`` (jx, jy) in
@@ -257,7 +291,10 @@ class TemporalUpsampler:
         turns the disocclusion test off; ``rotation`` the view's rotation since the previous frame
         in degrees (:func:`view_rotation`): 0 (a still camera, a pan or a zoom) accumulates a long
         history with the narrow kernel; None (unknown) treats the frame as still only where every
-        motion vector is zero, else as rotating by ``assumed_rotation`` degrees.
+        motion vector is zero, else as rotating by ``assumed_rotation`` degrees; ``pixels_per_voxel``
+        the LR frame's pixels across the volume's smallest voxel spacing
+        (:attr:`~volsr_core.render.features.FeatureFrame.pixels_per_voxel`), None when unknown (then
+        no smoothing: the choice for frames that sample the volume coarsely).
 
         :attr:`last_aux` then holds what the blend threw away, (H, W, 4): the reprojected, rectified
         history colour (0 where there was none) and its share of the blend, n / (n + a) in [0, 1).
@@ -289,6 +326,9 @@ class TemporalUpsampler:
         static = static and still and has
         sigma = (self.static_sigma_hr if static else self.still_sigma_hr) / s if still else self.sigma
         cap = self.still_count if still else self.max_count / (1.0 + rotation / self.cap_angle)
+        smooth = 0.0 if still else self.smoothing(pixels_per_voxel)
+        tent = self.smooth_tent * smooth
+        cap *= 1.0 - (1.0 - self.smooth_count) * smooth
         inv2s2 = 1.0 / (2.0 * sigma * sigma)
         key = (w, jx, sigma)
         cols = self._cols.get(key)
@@ -303,8 +343,8 @@ class TemporalUpsampler:
             np.empty(shape, dtype=np.float32)
         out = np.empty(shape[:2] + (3,), dtype=np.float32)
         aux = np.empty(shape[:2] + (4,), dtype=np.float32)
-        _kernel(history, has, lr, motion, depth_arr, self._box, cols, s, jy, inv2s2, cap, disocclusion, not static,
-                out, new_history, aux)
+        _kernel(history, has, lr, motion, depth_arr, self._box, cols, s, jy, inv2s2, tent, cap, disocclusion,
+                not static, out, new_history, aux)
         self.last_aux = aux
         self._spare = self.history if has else None
         self.history = new_history
