@@ -36,7 +36,34 @@ def scene(tmp_path_factory):
 
 def test_levels_run_finest_first():
     shipped = [{"scale": 4, "variant": "S"}, {"scale": 2, "variant": "S"}, {"scale": 4, "variant": "M"}]
-    assert [lv.label for lv in levels(shipped)] == ["native 1 spp", "VolSR S 2x", "VolSR M 4x", "VolSR S 4x"]
+    assert [lv.label for lv in levels(shipped)] == ["native 1 spp", "VolSR S 2x", "TAAU 2x", "VolSR M 4x",
+                                                     "VolSR S 4x", "TAAU 4x"]
+
+
+def test_a_budget_below_the_2x_model_takes_taau_2x_before_any_4x_level(scene):
+    """TAAU at 2x costs an LR render and a few ms; a budget it fits, and the 2x model does not, draws it,
+    not the 4x model (measured: any 2x method beats every 4x one, docs/performance.md)."""
+    volume, tf, files = scene
+    choices = [Level(1), Level(2, "S"), Level(2), Level(4, "S"), Level(4)]
+    probe = BudgetRenderer(volume, tf, 1e6, size=SIZE, choices=choices, model_files=files, threads=2)
+    cameras = orbit_around(probe.caster.visible_bounds(), 12, 2.0)
+    probe.render(cameras[0])
+    cost = probe.estimates
+    print({level.label: round(ms, 1) for level, ms in cost.items()})
+    assert cost[Level(2)] < 0.7 * cost[Level(2, "S")], "TAAU 2x is much cheaper than the 2x model"
+    budget = (cost[Level(2)] + cost[Level(2, "S")]) / 2
+    renderer = BudgetRenderer(volume, tf, budget, size=SIZE, choices=choices, model_files=files, threads=2)
+    for camera in cameras:
+        image = renderer.render(camera)
+    assert renderer.state.level == "TAAU 2x"
+    assert renderer.low_resolution_size == (SIZE[0] // 2, SIZE[1] // 2) and image.shape == (*SIZE[::-1], 3)
+    assert renderer.last_timings["total_ms"] <= 1.5 * budget
+
+
+def test_taau_levels_need_a_size_they_divide(scene):
+    volume, tf, files = scene
+    with pytest.raises(ValueError, match="divisible by 4"):
+        BudgetRenderer(volume, tf, 10.0, size=(66, 66), choices=[Level(1), Level(4)])
 
 
 def test_a_moving_camera_takes_the_finest_level_within_the_budget_and_keeps_to_it(scene):

@@ -331,9 +331,10 @@ def add_upscale_parser(sub) -> None:
     up.add_argument("--variant", choices=("S", "M", "L", "auto"), default="S",
                     help=f"shipped model size [S]; shipped: {shipped_variants()}; " + AUTO_VARIANT_RULE)
     up.add_argument("--budget-ms", type=number("ms per frame", 0, 60000, low_open=True), metavar="MS",
-                    help="frame-budget mode: per moving frame, the finest of native full size and the shipped models "
-                    "(smaller scale, then larger variant first) whose measured time fits MS (each timed once on the "
-                    "first camera, then tracked frame by frame, as VTK's AutoAdjustSampleDistances does); a camera "
+                    help="frame-budget mode: per moving frame, the finest of native full size, the shipped models and "
+                    "TAAU alone (smaller scale first; at a scale, larger variant first, then TAAU) whose measured time "
+                    "fits MS (each timed once on the first camera, then tracked frame by frame, as VTK's "
+                    "AutoAdjustSampleDistances does); a camera "
                     "that holds still refines instead, one more full-size jittered sample per frame (after N still "
                     "frames: the native N-spp image); --scale then only sets the bilinear panel's size")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",

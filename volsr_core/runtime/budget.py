@@ -3,8 +3,11 @@
 As VTK's AutoAdjustSampleDistances picks its sample distance from the last frame times, a
 :class:`BudgetRenderer` keeps a running estimate of each level's ms per frame and renders every
 moving frame with the finest level whose estimate fits ``budget_ms``. The levels, finest first:
-native full size, then the shipped models from the smallest scale and largest variant down
-(:func:`levels`): each a :class:`~volsr_core.runtime.pipeline.Pipeline` with its own history.
+native full size, then per scale from the smallest up the shipped models of that scale, largest
+variant first, then TAAU alone at that scale (:func:`levels`): each with its own history (a
+:class:`~volsr_core.runtime.pipeline.Pipeline`, or :class:`TaauLevel`). The order is measured
+(docs/performance.md): a model beats the TAAU it refines, and any method at a scale beats every
+method at the next one (TAAU 2x beats the 4x models by 3.6-5.2 dB at 512²), whatever their costs.
 
 While the camera holds still, frames refine progressively instead: every frame adds one more
 Halton-jittered full-size sample per pixel (ray starts jittered per sample) to a running mean,
@@ -21,6 +24,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from volsr_core.render.raycaster import RayCaster
+from volsr_core.runtime.methods import Taau
 from volsr_core.runtime.pipeline import Pipeline
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
@@ -33,22 +37,46 @@ STILL_SEED = 10**6  # ray-start seeds of still samples, apart from the moving fr
 
 @dataclass(frozen=True)
 class Level:
-    """One way to make a frame: ``scale`` 1 (native full size) or a shipped model's scale and ``variant``."""
+    """One way to make a frame: ``scale`` 1 (native full size), a shipped model's scale and ``variant``,
+    or TAAU alone at ``scale`` (``variant`` None)."""
 
     scale: int
     variant: str | None = None
 
     @property
     def label(self) -> str:
-        return "native 1 spp" if self.scale == 1 else f"VolSR {self.variant} {self.scale}x"
+        if self.scale == 1:
+            return "native 1 spp"
+        return f"TAAU {self.scale}x" if self.variant is None else f"VolSR {self.variant} {self.scale}x"
 
 
 def levels(shipped: Sequence[dict[str, Any]]) -> list[Level]:
-    """Native full size, then the shipped models (registry entries), finest first: smaller scale first,
-    larger variant first within a scale."""
-    models = sorted((Level(int(e["scale"]), e["variant"]) for e in shipped),
-                    key=lambda lv: (lv.scale, VARIANT_ORDER.index(lv.variant) if lv.variant in VARIANT_ORDER else 9))
-    return [Level(1)] + models
+    """Native full size, then per scale (smallest first) the shipped models (registry entries) of that
+    scale, larger variant first, then TAAU at that scale."""
+    models = [Level(int(e["scale"]), e["variant"]) for e in shipped]
+    taau = [Level(scale) for scale in sorted({lv.scale for lv in models})]
+    order = {**{v: i for i, v in enumerate(VARIANT_ORDER)}, None: len(VARIANT_ORDER) + 1}
+    return [Level(1)] + sorted(models + taau, key=lambda lv: (lv.scale, order.get(lv.variant, len(VARIANT_ORDER))))
+
+
+class TaauLevel:
+    """TAAU alone at ``scale`` (:class:`~volsr_core.runtime.methods.Taau` on ``caster``), with the part of
+    the :class:`~volsr_core.runtime.pipeline.Pipeline` interface the budget renderer uses."""
+
+    def __init__(self, caster: RayCaster, size: tuple[int, int], scale: int):
+        self.method = Taau(caster, size, scale)
+        self.low_resolution_size = (size[0] // scale, size[1] // scale)
+        self.last_timings: dict[str, float] = {}
+        self.last_low_resolution = None
+
+    def reset(self, reason: str = "") -> None:
+        self.method.reset()
+
+    def render(self, camera: Camera) -> np.ndarray:
+        frame = self.method(camera)
+        self.last_timings = {"render_ms": frame.ms_render, "network_ms": frame.ms_upscale, "total_ms": frame.ms_total}
+        self.last_low_resolution = frame.low_resolution
+        return frame.image
 
 
 @dataclass
@@ -65,7 +93,8 @@ class BudgetRenderer:
     """Renders ``volume`` at ``size`` within ``budget_ms`` per moving frame (see the module docstring).
 
     - ``choices``: the :class:`Level` list to choose from, finest first (default :func:`levels` of the
-      shipped models); ``model_files`` maps a level to its model file (default: the shipped one);
+      shipped models, less the TAAU levels whose scale does not divide ``size``); ``model_files`` maps
+      a model level to its model file (default: the shipped one);
     - ``smoothing``: weight of a new measurement in a level's running ms estimate;
     - ``finer_margin``: a finer level is taken only when its estimate is below this fraction of the
       budget (hysteresis: levels do not alternate frame by frame, which would drop the history);
@@ -89,13 +118,20 @@ class BudgetRenderer:
 
         self.budget_ms, self.size = float(budget_ms), (int(size[0]), int(size[1]))
         self.smoothing, self.finer_margin = float(smoothing), float(finer_margin)
-        self.choices = list(choices) if choices is not None else levels(shipped_models())
+        if choices is None:
+            choices = [lv for lv in levels(shipped_models())
+                       if lv.variant is not None or (self.size[0] % lv.scale == 0 and self.size[1] % lv.scale == 0)]
+        self.choices = list(choices)
         files = dict(model_files or {})
         self.caster = RayCaster(volume, transfer_function, sample_distance=sample_distance, device=device,
                                 background=background, start_jitter="ign")
-        self.pipelines: dict[Level, Pipeline] = {}
+        self.pipelines: dict[Level, Pipeline | TaauLevel] = {}
         for level in self.choices:
-            if level.scale > 1:
+            if level.scale > 1 and level.variant is None:
+                if self.size[0] % level.scale or self.size[1] % level.scale:
+                    raise ValueError(f"TAAU {level.scale}x needs a size divisible by {level.scale}, got {self.size}")
+                self.pipelines[level] = TaauLevel(self.caster, self.size, level.scale)
+            elif level.scale > 1:
                 model = files.get(level) or model_file(level.variant, level.scale)
                 self.pipelines[level] = Pipeline(volume, transfer_function, model, scale=level.scale, size=self.size,
                                                  variant=level.variant, device=device, threads=threads,
