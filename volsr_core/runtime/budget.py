@@ -54,9 +54,13 @@ def levels(shipped: Sequence[dict[str, Any]]) -> list[Level]:
     """Native full size, then per scale (smallest first) the shipped models (registry entries) of that
     scale, larger variant first, then TAAU at that scale."""
     models = [Level(int(e["scale"]), e["variant"]) for e in shipped]
-    taau = [Level(scale) for scale in sorted({lv.scale for lv in models})]
-    order = {**{v: i for i, v in enumerate(VARIANT_ORDER)}, None: len(VARIANT_ORDER) + 1}
-    return [Level(1)] + sorted(models + taau, key=lambda lv: (lv.scale, order.get(lv.variant, len(VARIANT_ORDER))))
+    taau = [Level(scale) for scale in {lv.scale for lv in models}]
+
+    def finest_first(level: Level) -> tuple:
+        rank = VARIANT_ORDER.index(level.variant) if level.variant in VARIANT_ORDER else len(VARIANT_ORDER)
+        return level.scale, level.variant is None, rank
+
+    return [Level(1)] + sorted(models + taau, key=finest_first)
 
 
 class TaauLevel:
