@@ -82,7 +82,7 @@ KEEP_PRESET = "Slicer's own"
 PRESETS = ("CT-Bone", "CT-AAA", "CT-Cardiac", "CT-Chest-Contrast-Enhanced", "CT-Soft-Tissue", "CT-Lung",
            "CT-Phantom", "MR-Default", "MR-Angio")
 SCALES = (2, 4, 8)
-VARIANTS = ("S", "M", "L")
+VARIANTS = ("XS", "S", "M", "L")
 DEVICES = ("cpu", "cuda")
 
 
@@ -97,7 +97,7 @@ class VolSRParameterNode:
     inputVolume - the scalar volume VolSR draws in the first 3D view (volume rendering is switched on for it).
     preset - the VolSR preset written into the volume's volume property node; KEEP_PRESET keeps Slicer's own.
     scale - upscaling factor: the volume is ray cast at 1/scale of the view's width and height.
-    variant - network size: S (fastest), M, L (best).
+    variant - network size: XS (fastest), S, M, L (best).
     device - where the ray caster and the network run.
     modelPath - an .onnx/.pt model file; "" for the shipped model of the variant at the scale.
     enabled - VolSR draws the 3D view (True) or Slicer does (False).

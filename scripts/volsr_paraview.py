@@ -72,7 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="view and output size in pixels (default 512)")
     p.add_argument("--scale", type=int, default=4, help="upscaling factor; VolSR renders at 1/scale (default 4)")
     p.add_argument("--model", metavar="FILE", help=".onnx or .pt model (default: the shipped model of --variant)")
-    p.add_argument("--variant", default="S", choices=["S", "M", "L"], help="shipped model variant (default S)")
+    p.add_argument("--variant", default="S", choices=["XS", "S", "M", "L"], help="shipped model variant (default S)")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"], help="ray caster and network device")
     p.add_argument("--threads", type=int, help="onnxruntime intra-op threads (default: its own choice)")
     p.add_argument("--out", default="out/paraview", metavar="DIR", help="output folder (default out/paraview)")

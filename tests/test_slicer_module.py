@@ -111,7 +111,7 @@ def test_the_ui_file_is_designer_xml_with_every_widget_the_module_uses():
     def items(name):
         return [i.findtext("property/string") for i in root.find(f".//widget[@name='{name}']").findall("item")]
 
-    assert items("scaleComboBox") == ["2", "4", "8"] and items("variantComboBox") == ["S", "M", "L"]
+    assert items("scaleComboBox") == ["2", "4", "8"] and items("variantComboBox") == ["XS", "S", "M", "L"]
     declared = {c.findtext("class") for c in root.iter("customwidget")}
     custom = {c for c in widgets.values() if not c.startswith("Q")}
     assert custom <= declared, f"custom widgets not declared: {sorted(custom - declared)}"

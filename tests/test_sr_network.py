@@ -200,7 +200,7 @@ def test_a_network_config_reads_back_from_its_dict_and_refuses_unknown_keys():
     assert NetworkConfig.from_dict({"scale": 2, "fold": 2}) == NetworkConfig(scale=2, fold=2)  # defaults filled
     with pytest.raises(InputError, match=r"^m.pt: network.colour: unknown key \(allowed: scale, previous_frames, "
                                          r"features, fold, widths, reweight_width, feature_width, recurrent, "
-                                         r"taau_base, taau_aux\)$"):
+                                         r"taau_base, taau_aux, base_kernel\)$"):
         NetworkConfig.from_dict({**config.to_dict(), "colour": True}, source="m.pt", key="network")
     with pytest.raises(InputError, match=r"^m.pt: network.widths\[0\]: expected an integer, got str '8'$"):
         NetworkConfig.from_dict({"widths": ["8"]}, source="m.pt", key="network")
@@ -235,4 +235,57 @@ def test_onnx_metadata_with_an_unknown_key_is_a_one_line_error(tmp_path):
     with pytest.raises(InputError) as caught:
         OnnxEngine(path, providers=["CPUExecutionProvider"])
     assert str(caught.value) == (f"{path}: volsr.network.colour: unknown key (allowed: scale, previous_frames, "
-                                 "features, fold, widths, reweight_width, feature_width, recurrent, taau_base, taau_aux)")
+                                 "features, fold, widths, reweight_width, feature_width, recurrent, taau_base, taau_aux, "
+                                 "base_kernel)")
+
+
+# -- variant XS: a learned filter on the base --------------------------------------------------------
+@pytest.mark.parametrize("scale", (2, 4))
+def test_variant_xs_starts_as_taau_exactly_and_filters_the_bilinear_upscale_without_taau(scale):
+    config = variant_config("XS", scale, previous_frames=2, taau_base=True, taau_aux=True)
+    assert (config.widths, config.base_kernel, config.previous_frames, config.taau_aux) == ((), 2 * scale + 1, 0, False)
+    net = SuperResolutionNet(config).eval()
+    assert sum(p.numel() for p in net.parameters()) == 3 * (2 * scale + 1) ** 2 + 3
+    lr, motion, jitter = inputs(config, 7, 5, batch=1)[:3]
+    history = torch.rand(1, config.history_channels, 7 * scale, 5 * scale)
+    with torch.no_grad():
+        assert torch.equal(net(lr, motion, jitter, history * 1.5), torch.clamp(history * 1.5, 0, 1)[:, :3])
+        bilinear = torch.nn.functional.interpolate(lr[:, 0, :3], scale_factor=scale, mode="bilinear",
+                                                   align_corners=False)
+        plain = SuperResolutionNet(variant_config("XS", scale)).eval()
+        assert torch.equal(plain(lr, motion, jitter), bilinear)
+
+
+def test_a_network_without_a_u_net_needs_a_base_filter_and_no_previous_frames():
+    with pytest.raises(ValueError, match="needs a learned base filter"):
+        NetworkConfig(scale=2, previous_frames=0, fold=2, widths=(), taau_base=True)
+    with pytest.raises(ValueError, match="no previous frames"):
+        NetworkConfig(scale=2, previous_frames=1, fold=2, widths=(), base_kernel=5)
+    with pytest.raises(ValueError, match="odd"):
+        NetworkConfig(scale=2, previous_frames=0, fold=2, base_kernel=4)
+
+
+def test_the_base_filter_learns_to_undo_a_known_blur():
+    """Trained on pairs (blurred, sharp) of white noise, XS's filter must recover part of what a 3x3 box blur
+    took: its error falls well below the blurred image's (the identity it starts as; measured 0.54 of it: the
+    box blur loses some frequencies entirely, so no filter gets near 0)."""
+    g = torch.Generator().manual_seed(0)
+    net = SuperResolutionNet(variant_config("XS", 2, taau_base=True))
+    optimizer = torch.optim.Adam(net.parameters(), lr=0.01)
+    lr, motion, jitter = torch.zeros(8, 1, net.config.in_channels, 16, 16), torch.zeros(8, 1, 2, 16, 16), torch.zeros(8, 1, 2)
+    inner = (..., slice(4, -4), slice(4, -4))
+
+    def pair() -> tuple[torch.Tensor, torch.Tensor]:
+        sharp = torch.rand(8, 3, 32, 32, generator=g)
+        return sharp, torch.nn.functional.avg_pool2d(torch.nn.functional.pad(sharp, (1, 1, 1, 1), mode="replicate"), 3, 1)
+
+    for _ in range(300):
+        sharp, blurred = pair()
+        loss = torch.mean((net(lr, motion, jitter, blurred) - sharp)[inner] ** 2)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    sharp, blurred = pair()
+    with torch.no_grad():
+        error = torch.mean((net(lr, motion, jitter, blurred) - sharp)[inner] ** 2)
+    assert error < 0.7 * torch.mean((blurred - sharp)[inner] ** 2)

@@ -23,7 +23,8 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
     """The card section for the model whose ONNX file is named ``model_file``, from bench.json files (the
     distance to the curve is the one the run's own target check worked out, ``targets``)."""
     lines = [SECTION, "",
-             "Medians over the measured frames of `volsr bench` (ONNX Runtime, CPU, 2 threads, on the project's "
+             "Medians over the measured frames of `volsr bench` (ONNX Runtime, CPU, 2 threads, or for variant XS its "
+             "numba filter kernel, on the project's "
              "2-core machine; the LR render is the ray caster's). \"vs curve\": PSNR minus that of native "
              "rendering at reduced size + bilinear at the same total time (positive: the model pays off).", "",
              "| run | volume | LR render ms | TAAU + network ms | total ms | PSNR dB | vs curve dB | native 1 spp |",

@@ -34,11 +34,12 @@ def main() -> None:
     from volsr_core.hashing import file_sha256
     from volsr_core.runtime.export import OPSET, export_onnx
     from volsr_core.sr.checkpoint import load_model, save_checkpoint
+    from volsr_core.sr.network_config import VARIANTS
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("checkpoint", type=Path)
     parser.add_argument("--name", required=True)
-    parser.add_argument("--variant", required=True, choices=["S", "M", "L"])
+    parser.add_argument("--variant", required=True, choices=VARIANTS)
     parser.add_argument("--config", type=Path, required=True, help="the training config it was trained with")
     parser.add_argument("--eval", type=Path, action="append", default=[], help="eval.json files for the card")
     parser.add_argument("--card-notes", default="", help="markdown paragraph: data, time, hardware, quality bar")

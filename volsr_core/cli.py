@@ -19,6 +19,7 @@ from volsr_core.apps.options import (
     output_file, output_folder, parse_range, parse_rgb, parse_size,
 )
 from volsr_core.errors import WRITE_ERRNOS, InputError, OutputError, VolSRError, require_extra, write_error
+from volsr_core.sr.network_config import VARIANTS
 
 
 # option types: finite numbers in range, with their units (apps/options.py)
@@ -151,9 +152,16 @@ def cmd_train(args: argparse.Namespace) -> int:
     for module in ("torch", "skimage"):
         require_extra(module, "volsr train")
     from volsr_core.sr.config import load_training_config
-    from volsr_core.sr.training import Trainer
+    from volsr_core.sr.least_squares import is_closed_form, train_base_filter
+    from volsr_core.sr.training import Trainer, build_model
 
     config = load_training_config(args.config)
+    model = build_model(config)
+    if is_closed_form(model):  # variant XS: its filter has a closed-form least-squares fit
+        result = train_base_filter(config, model)
+        print(f"fitted the {model.config.base_kernel}x{model.config.base_kernel} base filter by least squares; "
+              f"validation PSNR {result['best_psnr']:.2f} dB (best.pt in {config.out})")
+        return 0
     trainer = Trainer(config)
     result = trainer.run()
     if trainer.rank == 0:
@@ -182,10 +190,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 # -- volsr upscale --------------------------------------------------------------------------------
-AUTO_VARIANT_RULE = ("auto: the largest shipped variant (L > M > S) whose network time for one frame of --size "
+AUTO_VARIANT_RULE = ("auto: the largest shipped variant (L > M > S > XS) whose network time for one frame of --size "
                      "(measured at start-up: one warm-up, then the median of 3 runs on zeros) is at most the time "
                      "of one native full-size 1-spp render of the first camera of the first input, i.e. the "
-                     "network must be cheaper than rendering natively; S when none is")
+                     "network must be cheaper than rendering natively; the smallest shipped when none is")
 
 
 def cmd_upscale(args: argparse.Namespace) -> int:
@@ -328,7 +336,7 @@ def add_upscale_parser(sub) -> None:
                     "VolSR and bilinear against it (slow) [0: off]")
     up.add_argument("--model", metavar="FILE", help="model file, .onnx (onnxruntime) or .pt (PyTorch); default: the "
                     "shipped model of --variant at --scale")
-    up.add_argument("--variant", choices=("S", "M", "L", "auto"), default="S",
+    up.add_argument("--variant", choices=VARIANTS + ("auto",), default="S",
                     help=f"shipped model size [S]; shipped: {shipped_variants()}; " + AUTO_VARIANT_RULE)
     up.add_argument("--budget-ms", type=number("ms per frame", 0, 60000, low_open=True), metavar="MS",
                     help="frame-budget mode: per moving frame, the finest of native full size, the shipped models and "
@@ -410,7 +418,8 @@ def add_bench_parser(sub) -> None:
                    help="size reductions for native + bilinear [2,3,4,6,8]")
     b.add_argument("--scales", type=parse_int_list, default=[2, 4, 8], metavar="S,..",
                    help="upscaling factors of TAAU and the VolSR models [2,4,8]")
-    b.add_argument("--variants", default="S,M,L", metavar="V,..", help="VolSR model variants [S,M,L]")
+    b.add_argument("--variants", default=",".join(VARIANTS), metavar="V,..",
+                   help=f"VolSR model variants [{','.join(VARIANTS)}]")
     b.add_argument("--models-dir", metavar="DIR",
                    help="folder of .onnx models (export_onnx) to use instead of the shipped ones; scale and variant "
                    "come from each model's metadata")

@@ -30,8 +30,9 @@ import numpy as np
 from volsr_core.atomic import stale_parts
 from volsr_core.images import mp4_writer, side_by_side, to_uint8, write_png
 from volsr_core.runtime.methods import Method, Native, ReducedSize, VolSR
+from volsr_core.sr.network_config import VARIANTS
 
-VARIANTS_LARGEST_FIRST = ("L", "M", "S")
+VARIANTS_LARGEST_FIRST = tuple(reversed(VARIANTS))
 PANELS = ("native 1 spp", "bilinear", "VolSR")
 
 
@@ -111,7 +112,7 @@ def video_paths(video: str | os.PathLike | None, names: Sequence[str]) -> dict[s
 
 # -- the --variant auto rule ------------------------------------------------------------------------
 def choose_variant(network_ms: Mapping[str, float], budget_ms: float, fallback: str = "S") -> str:
-    """The largest variant (L > M > S) whose network time per frame is at most ``budget_ms``.
+    """The largest variant (L > M > S > XS) whose network time per frame is at most ``budget_ms``.
 
     ``network_ms`` maps the variants measured to their ms per frame; when none fits, ``fallback``.
     """
@@ -154,7 +155,7 @@ def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: s
 
     Budget: one native full-size 1-spp render of ``camera``. The shipped variants at ``scale``
     are timed largest first (:func:`network_ms` on an LR frame of ``size / scale``) until one fits
-    (:func:`choose_variant`); the smallest shipped one (S) is the fallback.
+    (:func:`choose_variant`); the smallest shipped one is the fallback.
     """
     from volsr_core.runtime.engines import open_engine
     from volsr_core.runtime.models import find_model, model_file, shipped_models

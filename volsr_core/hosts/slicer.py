@@ -30,12 +30,12 @@ from volsr_core.scene.volume import Volume
 from volsr_core.hosts.vtk_adapter import VolSRPostProcess
 from volsr_core.scene.camera import transform_camera
 from volsr_core.scene.vtk_bridge import matrix_4x4, write_volume_property
+from volsr_core.sr.network_config import VARIANTS
 
 RAS_TO_LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
 LPS_TO_RAS = RAS_TO_LPS.copy()  # its own inverse
 SLICER_OVERLAY_LAYER = 3
 SCALES = (2, 4, 8)
-VARIANTS = ("S", "M", "L")
 
 
 # coordinates ------------------------------------------------------------------------------------
@@ -147,7 +147,7 @@ class SlicerSession:
       volume node there (its vtkVolumeProperty is read, it is hidden while VolSR draws);
     - ``volume``: our Volume in LPS (:func:`volume_from_ijk_to_ras`); None reads the vtkVolume's
       vtkImageData and matrix (Slicer puts the IJK-to-RAS matrix there) and converts them;
-    - ``model``, ``scale`` (2, 4, 8), ``variant`` (S, M, L), ``device``, ``backend``, ``threads``,
+    - ``model``, ``scale`` (2, 4, 8), ``variant`` (XS, S, M, L), ``device``, ``backend``, ``threads``,
       ``sample_distance``: as :class:`VolSRPostProcess` takes them; ``layer``: the overlay's
       window layer, at least :data:`SLICER_OVERLAY_LAYER`.
     """

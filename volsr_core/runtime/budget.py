@@ -29,9 +29,10 @@ from volsr_core.runtime.pipeline import Pipeline
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
+from volsr_core.sr.network_config import VARIANTS
 from volsr_core.temporal.jitter import halton_jitter
 
-VARIANT_ORDER = ("L", "M", "S")  # larger first: better at the same scale
+VARIANT_ORDER = tuple(reversed(VARIANTS))  # larger first: better at the same scale
 STILL_SEED = 10**6  # ray-start seeds of still samples, apart from the moving frames' (which count frames)
 
 

@@ -3,7 +3,9 @@
 The graph's inputs are the network's: ``lr`` (B, N+1, C, h, w), ``motion`` (B, N+1, 2, h, w),
 ``jitter`` (B, N+1, 2) and, for networks that take one, ``history`` (B, history_channels, H, W); its output ``hr``
 (B, 3, H, W), H = h * scale. The network's configuration rides in the model's metadata
-(``volsr.network``, JSON) so a session knows the scale, frames and features without PyTorch.
+(``volsr.network``, JSON) so a session knows the scale, frames and features without PyTorch; a
+network with a base filter also carries its weights (``volsr.base_filter``), which variant XS runs
+in a numba kernel on the CPU (:mod:`volsr_core.runtime.base_filter`).
 
 The graph comes from PyTorch's current exporter (``torch.onnx.export(dynamo=True)``: torch.export, then
 onnxscript), not the TorchScript one that PyTorch deprecated. Its graphs keep batch, height and width dynamic
@@ -24,6 +26,7 @@ import torch
 
 from volsr_core.atomic import atomic_write
 from volsr_core.errors import require_extra
+from volsr_core.runtime.base_filter import FILTER_KEY, filter_metadata
 from volsr_core.runtime.engines import METADATA_KEY
 from volsr_core.sr.network import NetworkConfig, SuperResolutionNet
 
@@ -87,6 +90,10 @@ def export_onnx(model: SuperResolutionNet, path: str | os.PathLike, example_size
     graph = program.model_proto
     entry = graph.metadata_props.add()
     entry.key, entry.value = METADATA_KEY, json.dumps(config.to_dict())
+    if model.base_filter is not None:  # its weights again, for the CPU kernel (runtime/base_filter.py)
+        entry = graph.metadata_props.add()
+        conv = model.base_filter.conv
+        entry.key, entry.value = FILTER_KEY, filter_metadata(conv.weight.detach()[:, 0].numpy(), conv.bias.detach().numpy())
     graph.producer_name = "volsr"
     with atomic_write(path) as fh:
         fh.write(graph.SerializeToString())

@@ -11,8 +11,10 @@ from typing import Any
 import numpy as np
 
 from volsr_core.render.features import FeatureFrame
+from volsr_core.runtime.base_filter import filter_image
 from volsr_core.scene.camera import Camera, rotation_between
 from volsr_core.sr.history import HistoryFeed
+from volsr_core.temporal.resample import upscale_bilinear
 from volsr_core.temporal.taau import view_rotation
 
 
@@ -73,6 +75,7 @@ class StatefulUpscaler:
         self.max_turn, self.max_zoom = float(max_turn), float(max_zoom)
         self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=self.config.previous_frames + 1)
         self.history = HistoryFeed(self.config)
+        self.base_filter = getattr(engine, "base_filter", None)  # variant XS on the CPU: no network inputs
         self.resets = 0
         self.last_reset_reason = ""
 
@@ -85,11 +88,11 @@ class StatefulUpscaler:
 
     def _implausible(self, motion: np.ndarray) -> str:
         h, w = motion.shape[:2]
-        length = np.hypot(motion[..., 0], motion[..., 1])
-        if np.median(length) > self.max_motion * np.hypot(h, w):
+        squared = np.square(motion[..., 0]) + np.square(motion[..., 1])  # the median of lengths, squared
+        if np.median(squared) > (self.max_motion * np.hypot(h, w)) ** 2:
             return "large motion"
-        ys, xs = np.mgrid[0:h, 0:w]
-        x, y = xs + 0.5 + motion[..., 0], ys + 0.5 + motion[..., 1]
+        x = np.arange(w, dtype=np.float32)[None, :] + 0.5 + motion[..., 0]
+        y = np.arange(h, dtype=np.float32)[:, None] + 0.5 + motion[..., 1]
         if np.mean((x < 0) | (x > w) | (y < 0) | (y > h)) > self.max_offscreen:
             return "motion leaves the screen"
         return ""
@@ -103,6 +106,8 @@ class StatefulUpscaler:
 
     def upscale(self, frame: FeatureFrame) -> np.ndarray:
         """The HR image for ``frame`` (see the class); float32 (H, W, 3) in [0, 1]."""
+        if self.base_filter is not None:
+            return self._filtered(frame)
         inputs = network_inputs(frame, self.config.features)
         motion = np.ascontiguousarray(frame.motion, dtype=np.float32).transpose(2, 0, 1)
         jitter = np.asarray(frame.jitter, dtype=np.float32)
@@ -127,3 +132,19 @@ class StatefulUpscaler:
         out = self.engine(lr, vectors, jitters, history)[0].transpose(1, 2, 0)
         self.history.keep(out)
         return np.clip(out, 0.0, 1.0)
+
+    def _filtered(self, frame: FeatureFrame) -> np.ndarray:
+        """:meth:`upscale` for a network that is only its base filter, run by the engine's CPU kernel
+        (:func:`~volsr_core.runtime.base_filter.filter_image`) on TAAU's (H, W, 3) estimate as it comes."""
+        colour = np.ascontiguousarray(frame.color, dtype=np.float32)
+        if self.frames:
+            reason = self._cut(frame, colour)
+            if reason:
+                self.reset(reason)
+        motion = frame.motion if self.frames else np.zeros_like(frame.motion)
+        self.frames.appendleft((colour, motion, np.asarray(frame.jitter, dtype=np.float32)))
+        base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth,
+                            view_rotation(frame.camera, frame.previous_camera))
+        if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale
+            base = upscale_bilinear(colour, self.config.scale)
+        return np.clip(filter_image(base, *self.base_filter), 0.0, 1.0)

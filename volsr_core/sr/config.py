@@ -31,7 +31,7 @@ class DataSection:
 
 @dataclass(frozen=True, kw_only=True)
 class ModelSection:
-    """The network: a sized variant (S, M, L), optionally with its own ``fold`` and ``widths``;
+    """The network: a sized variant (XS, S, M, L), optionally with its own ``fold`` and ``widths``;
     ``init`` names weights (model file or checkpoint) to fine-tune from."""
 
     variant: str = "S"

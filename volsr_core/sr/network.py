@@ -32,6 +32,11 @@ convolution at the low resolution with the sub-pixel positions kept as channels,
 the output with a pixel shuffle. The output adds the bilinearly upscaled current colour
 (residual learning), clamped to [0, 1] only by the loss's targets, not in the graph.
 
+``base_kernel`` passes that base through a learned filter per colour channel first
+(:class:`BaseFilter`). Variant XS is that filter alone (``widths`` empty: no steps 1-5): TAAU's
+estimate, sharpened by a (2 * scale + 1)² kernel learned from the data, for a frame budget where
+the U-Net does not fit.
+
 Tensors: ``lr`` (B, N+1, C, h, w), index 0 the current frame; ``motion`` (B, N+1, 2, h, w) each
 frame's vectors to its own previous frame in LR pixels (docs/conventions.md); ``jitter``
 (B, N+1, 2) in LR pixels, +y down; ``history`` (B, ``history_channels``, H, W): the network's
@@ -106,6 +111,24 @@ class Reweighting(nn.Module):
         return (torch.tanh(self.rest(y)) + 1.0) * 5.0
 
 
+class BaseFilter(nn.Module):
+    """A learned ``kernel``² filter per colour channel (depthwise, edge pixels repeated past the border),
+    starting as the identity: what the residual adds to, or (variant XS) the whole network. At scale s
+    a blur of one LR pixel spans s HR pixels either way, hence XS's kernel of 2 * s + 1."""
+
+    def __init__(self, kernel: int):
+        super().__init__()
+        self.conv = nn.Conv2d(3, 3, kernel, groups=3)
+        with torch.no_grad():
+            self.conv.weight.zero_()
+            self.conv.weight[:, 0, kernel // 2, kernel // 2] = 1.0
+            self.conv.bias.zero_()
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        r = self.conv.kernel_size[0] // 2
+        return self.conv(F.pad(x, (r, r, r, r), mode="replicate"))
+
+
 class UNet(nn.Module):
     """Encoder-decoder with concatenated skips (after Hofmann et al.'s denoising autoencoder)."""
 
@@ -145,6 +168,9 @@ class SuperResolutionNet(nn.Module):
         super().__init__()
         self.config = config
         c, n, d = config.in_channels, config.previous_frames, config.fold
+        self.base_filter = BaseFilter(config.base_kernel) if config.base_kernel else None
+        if not config.widths:  # XS: the learned base filter is the whole network
+            return
         self.features = FeatureBlock(c, config.feature_width)
         frame_channels = c + 8
         self.rgbd = config.rgbd_channels
@@ -164,10 +190,12 @@ class SuperResolutionNet(nn.Module):
         cfg = self.config
         s, d, n = cfg.scale, cfg.fold, cfg.previous_frames
         b, frames, c, h, w = lr.shape
+        if not cfg.widths:  # XS: the filtered base alone
+            return self.base_filter(self.unfiltered_base(lr, history))
+        base = F.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
         feats = self.features(lr.reshape(b * frames, c, h, w)).reshape(b, frames, -1, h, w)
         hr_motion = [upsample_motion(motion[:, k], s) for k in range(max(n, int(cfg.recurrent)))]
         flows = accumulated_flows(hr_motion[:n])
-        base = F.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
         warped_history = None
         if cfg.takes_history:
             warped_history = base if history is None else torch.clamp(history, 0.0, 1.0)
@@ -177,6 +205,8 @@ class SuperResolutionNet(nn.Module):
                 warped_history = backward_warp(warped_history, hr_motion[0])
             if d > 1:
                 warped_history = F.pixel_unshuffle(warped_history, d)
+        if self.base_filter is not None:
+            base = self.base_filter(base)
         if d == 1:
             stack = hr_stack(feats, jitter, flows, s, d) + ([warped_history] if cfg.takes_history else [])
             rgbd = [x[:, self.rgbd] for x in stack[:n + 1]] + stack[n + 1:]
@@ -186,6 +216,13 @@ class SuperResolutionNet(nn.Module):
         else:
             out = F.pixel_shuffle(self._folded(feats, jitter, flows, warped_history), d)
         return out + base
+
+    def unfiltered_base(self, lr: torch.Tensor, history: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, 3, H, W): TAAU's estimate (``taau_base`` with a history), else the bilinearly upscaled current
+        colour; what the residual (or, variant XS, the base filter alone) starts from."""
+        if self.config.taau_base and history is not None:
+            return torch.clamp(history[:, :3], 0.0, 1.0)
+        return F.interpolate(lr[:, 0, :3], scale_factor=self.config.scale, mode="bilinear", align_corners=False)
 
     def _folded(self, feats: torch.Tensor, jitter: torch.Tensor, flows: list[torch.Tensor],
                 history: torch.Tensor | None) -> torch.Tensor:

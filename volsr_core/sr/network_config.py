@@ -12,6 +12,7 @@ from volsr_core.config_reader import Source, read_dataclass
 
 FEATURE_CHANNELS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4, "motion_depth": 1}
 SCALES = (2, 4, 8, 16)
+VARIANTS = ("XS", "S", "M", "L")  # the sized variants, smallest (fastest) first
 
 
 @dataclass(frozen=True)
@@ -22,12 +23,13 @@ class NetworkConfig:
     previous_frames: int = 2
     features: tuple[str, ...] = ("color", "depth", "max_rgba")
     fold: int = 4               # pixel-unshuffle factor for reweighting + U-Net (1 = full resolution)
-    widths: tuple[int, ...] = (32, 48, 64)  # U-Net channels per level, finest first
+    widths: tuple[int, ...] = (32, 48, 64)  # U-Net channels per level, finest first; () = no U-Net, no residual
     reweight_width: int = 32
     feature_width: int = 32     # the residual block's hidden channels (paper: 32)
     recurrent: bool = False     # history = the previous output, warped to this frame (not in the paper)
     taau_base: bool = False     # history = TAAU's estimate of this frame, and the base the output adds to
     taau_aux: bool = False      # taau_base, and the history also holds what TAAU's blend threw away (TemporalUpsampler.last_aux)
+    base_kernel: int = 0        # odd: the base passes through a learned base_kernel² filter per colour channel; 0 = none
 
     def __post_init__(self) -> None:
         if self.scale not in SCALES:
@@ -43,6 +45,13 @@ class NetworkConfig:
             raise ValueError("a network's history is either its previous output (recurrent) or TAAU's (taau_base)")
         if self.taau_aux and not self.taau_base:
             raise ValueError("taau_aux adds TAAU's side outputs to a TAAU-based network's history (taau_base)")
+        if self.base_kernel < 0 or (self.base_kernel and self.base_kernel % 2 == 0):
+            raise ValueError(f"base_kernel must be 0 or odd, got {self.base_kernel}")
+        if not self.widths and not self.base_kernel:
+            raise ValueError("a network without a U-Net (widths ()) needs a learned base filter (base_kernel)")
+        if not self.widths and (self.recurrent or self.previous_frames):
+            raise ValueError("a network without a U-Net (widths ()) filters its base only: no previous frames, "
+                             "not recurrent")
         object.__setattr__(self, "features", tuple(self.features))
         object.__setattr__(self, "widths", tuple(self.widths))
 
@@ -89,13 +98,21 @@ class NetworkConfig:
 def variant_config(variant: str, scale: int = 4, previous_frames: int = 2,
                    features: tuple[str, ...] = ("color", "depth", "max_rgba"),
                    recurrent: bool = False, taau_base: bool = False, taau_aux: bool = False) -> NetworkConfig:
-    """The sized variants: S folds by the scale (all convolutions at LR), M by scale/2, L by scale/4."""
+    """The sized variants: S folds by the scale (all convolutions at LR), M by scale/2, L by scale/4.
+
+    XS is no U-Net at all: a learned (2 * scale + 1)² filter per colour channel on the base (TAAU's
+    estimate with ``taau_base``, else the bilinear upscale), wide enough to undo a blur of one LR
+    pixel; it reads no previous frames and no side outputs (``previous_frames``, ``recurrent`` and
+    ``taau_aux`` are ignored).
+    """
     variant = variant.upper()
     history = {"recurrent": recurrent, "taau_base": taau_base, "taau_aux": taau_aux}
+    if variant == "XS":
+        return NetworkConfig(scale, 0, features, fold=scale, widths=(), base_kernel=2 * scale + 1, taau_base=taau_base)
     if variant == "S":
         return NetworkConfig(scale, previous_frames, features, fold=scale, widths=(32, 48, 64), **history)
     if variant == "M":
         return NetworkConfig(scale, previous_frames, features, fold=max(scale // 2, 1), widths=(32, 48, 64), **history)
     if variant == "L":
         return NetworkConfig(scale, previous_frames, features, fold=max(scale // 4, 1), widths=(32, 64, 96), **history)
-    raise ValueError(f"variant must be S, M or L, got {variant!r}")
+    raise ValueError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")

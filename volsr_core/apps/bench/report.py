@@ -188,7 +188,7 @@ def plot(results: dict[str, Any], path: str | os.PathLike) -> Path:
     n_rows = math.ceil(len(scenes) / cols) if scenes else 1
     fig, axes = plt.subplots(n_rows, cols, figsize=(5.2 * cols, 4.2 * n_rows), squeeze=False)
     styles = {"native": ("o", "C0"), "bilinear": ("s", "C1"), "taau": ("^", "C2"), "vtk": ("D", "C7")}
-    volsr_colours = {"S": "C3", "M": "C4", "L": "C5"}
+    volsr_colours = {"XS": "C8", "S": "C3", "M": "C4", "L": "C5"}
     for ax, scene in zip(axes.flat, scenes):
         mine = [r for r in _sorted_rows(results["rows"]) if r["scene"] == scene
                 and r["psnr"] is not None and r["ms_total"] is not None]

@@ -41,11 +41,11 @@ from volsr_core.errors import InputError, require
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.runtime.methods import Method, Native, ReducedSize, Taau, VolSR
 from volsr_core.scene.camera_paths import orbit_around
+from volsr_core.sr.network_config import VARIANTS
 
 SPP = (1, 2, 4)
 FACTORS = (2, 3, 4, 6, 8)
 SCALES = (2, 4, 8)
-VARIANTS = ("S", "M", "L")
 
 
 # -- models ---------------------------------------------------------------------------------------
@@ -59,7 +59,7 @@ class ModelSpec:
 
 
 def infer_variant(config) -> str | None:
-    """'S', 'M' or 'L' when ``config`` (a NetworkConfig) is that variant's shape, else None."""
+    """The variant (:data:`VARIANTS`) whose shape ``config`` (a NetworkConfig) is, else None."""
     from volsr_core.sr.network_config import variant_config
 
     for name in VARIANTS:
@@ -68,8 +68,8 @@ def infer_variant(config) -> str | None:
                                        recurrent=config.recurrent, taau_base=config.taau_base)
         except ValueError:
             continue
-        if (reference.fold, reference.widths, reference.reweight_width, reference.feature_width) == (
-                config.fold, config.widths, config.reweight_width, config.feature_width):
+        shape = ("fold", "widths", "reweight_width", "feature_width", "base_kernel")
+        if all(getattr(reference, key) == getattr(config, key) for key in shape):
             return name
     return None
 

@@ -1,0 +1,111 @@
+"""Closed-form training of a network whose only weights are the linear filter on its base (variant XS).
+
+XS's output is linear in its weights: per colour channel c, out_c(p) = b_c + sum_k w_ck base_c(p + o_k)
+over the kernel's offsets o_k (edge pixels repeated past the border, as :class:`~volsr_core.sr.network.
+BaseFilter` pads). The weights with the least squared error over the training frames, the error PSNR
+scores, solve the normal equations: one (k² + 1)-unknown system per channel, summed frame by frame, so no
+optimiser, learning rate or steps (stochastic gradient descent on the same data, 1500 AdamW steps,
+got about half the gain). Each frame's base is what the network is given at run time: TAAU's estimate of
+the whole frame (:class:`~volsr_core.sr.history.HistoryFeed` over the video from its first frame) with
+``taau_base``, else the bilinear upscale.
+"""
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from volsr_core.atomic import atomic_write
+from volsr_core.sr.checkpoint import save_checkpoint
+from volsr_core.sr.config import TrainingConfig
+from volsr_core.sr.loader import SequenceDataset
+from volsr_core.sr.metrics import psnr_ssim
+from volsr_core.sr.network import SuperResolutionNet
+
+RIDGE = 1e-6  # Tikhonov term, relative to the mean diagonal of the normal matrix: keeps flat data solvable
+
+
+def is_closed_form(model: SuperResolutionNet) -> bool:
+    """Whether ``model``'s only weights are its base filter (no U-Net: variant XS)."""
+    return not model.config.widths and model.base_filter is not None
+
+
+def design_matrix(base: torch.Tensor, kernel: int) -> torch.Tensor:
+    """(3, H, W) -> (3, H*W, kernel² + 1) float64: each pixel's kernel x kernel neighbourhood per channel
+    (edge-padded, row-major as the convolution's weights), then a 1 for the bias."""
+    r = kernel // 2
+    padded = F.pad(base[:, None].double(), (r, r, r, r), mode="replicate")  # (3, 1, H + 2r, W + 2r)
+    columns = F.unfold(padded, kernel).transpose(1, 2)  # (3, H*W, k²)
+    return torch.cat([columns, torch.ones_like(columns[..., :1])], dim=2)
+
+
+def item_inputs(item: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """A dataset item's current LR frame (1, 1, C, h, w) and TAAU history (1, C', H, W) or None."""
+    return item["lr"][None, :1], item["taau"][None, 0] if "taau" in item else None
+
+
+def fit_base_filter(model: SuperResolutionNet, dataset: SequenceDataset, progress: bool = True) -> int:
+    """Set ``model``'s base filter to the least-squares fit over every sample of ``dataset`` (whole
+    frames: ``crop`` None); returns the pixels fitted per channel."""
+    from tqdm import tqdm
+
+    kernel = model.config.base_kernel
+    normal = torch.zeros(3, kernel * kernel + 1, kernel * kernel + 1, dtype=torch.float64)
+    moment = torch.zeros(3, kernel * kernel + 1, dtype=torch.float64)
+    pixels = 0
+    with torch.no_grad():
+        for i in tqdm(range(len(dataset)), desc="least squares", unit="frame", disable=not progress):
+            item = dataset[i]
+            a = design_matrix(model.unfiltered_base(*item_inputs(item))[0], kernel)
+            target = item["hr"].reshape(3, -1, 1).double()
+            normal += a.transpose(1, 2) @ a
+            moment += (a.transpose(1, 2) @ target)[..., 0]
+            pixels += a.shape[1]
+        ridge = RIDGE * normal.diagonal(dim1=1, dim2=2).mean(dim=1)
+        solution = torch.linalg.solve(normal + ridge[:, None, None] * torch.eye(normal.shape[1], dtype=normal.dtype),
+                                      moment)
+        conv = model.base_filter.conv
+        conv.weight.copy_(solution[:, :-1].reshape(3, 1, kernel, kernel).to(conv.weight.dtype))
+        conv.bias.copy_(solution[:, -1].to(conv.bias.dtype))
+    return pixels
+
+
+@torch.no_grad()
+def mean_psnr(model: SuperResolutionNet, dataset: SequenceDataset, limit: int) -> float:
+    """Mean PSNR (scikit-image) of ``model`` on up to ``limit`` whole frames spread over ``dataset``."""
+    n = min(len(dataset), limit)
+    scores = []
+    for i in np.linspace(0, len(dataset) - 1, n).round().astype(int) if n else []:
+        item = dataset[int(i)]
+        lr, history = item_inputs(item)
+        out = model(lr, torch.zeros(1, 1, 2, *lr.shape[-2:]), item["jitter"][None, :1], history)
+        scores.append(psnr_ssim(out[0].numpy(), item["hr"].numpy())[0])
+    return float(np.mean(scores)) if scores else float("nan")
+
+
+def train_base_filter(config: TrainingConfig, model: SuperResolutionNet, progress: bool = True) -> dict[str, Any]:
+    """``volsr train`` for a closed-form network: fit on the train split, score the validation split, write
+    ``OUT/best.pt`` and a one-row ``OUT/log.csv`` (the optimiser, steps and loss of the config are unused)."""
+    from volsr_core.sr.training import LOG_FIELDS, run_folder_lock
+
+    data, out = config.data, Path(config.out)
+    started = time.perf_counter()
+    datasets = {split: SequenceDataset(data.root, split, data.scale, 0, None, data.features, augment=False,
+                                       seed=config.seed, taau=model.config if model.config.taau_base else None)
+                for split in ("train", "val")}
+    with run_folder_lock(out):
+        pixels = fit_base_filter(model, datasets["train"], progress)
+        psnr = mean_psnr(model, datasets["val"], config.train.max_val_samples)
+        save_checkpoint(out / "best.pt", model, extra={"step": 1, "psnr": psnr, "fitted_pixels": pixels})
+        row = {"step": 1, "epoch": 0, "loss": "", "lr": "", "val_psnr": f"{psnr:.4f}", "val_ssim": "",
+               "seconds": f"{time.perf_counter() - started:.1f}"}
+        with atomic_write(out / "log.csv", "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=LOG_FIELDS)
+            writer.writeheader()
+            writer.writerow(row)
+    return {"step": 1, "best_psnr": psnr}
