@@ -104,6 +104,14 @@ class StatefulUpscaler:
         return (camera_jump(frame.previous_camera, frame.camera, self.max_turn, self.max_zoom)
                 or self._implausible(frame.motion))
 
+    def _continues(self, frame: FeatureFrame, inputs: np.ndarray) -> bool:
+        """Whether ``frame`` continues the frames held: drops them first when it is a cut (:meth:`_cut`)."""
+        if self.frames:
+            reason = self._cut(frame, inputs)
+            if reason:
+                self.reset(reason)
+        return bool(self.frames)
+
     def upscale(self, frame: FeatureFrame) -> np.ndarray:
         """The HR image for ``frame`` (see the class); float32 (H, W, 3) in [0, 1]."""
         if self.base_filter is not None:
@@ -111,11 +119,7 @@ class StatefulUpscaler:
         inputs = network_inputs(frame, self.config.features)
         motion = np.ascontiguousarray(frame.motion, dtype=np.float32).transpose(2, 0, 1)
         jitter = np.asarray(frame.jitter, dtype=np.float32)
-        if self.frames:
-            reason = self._cut(frame, inputs)
-            if reason:
-                self.reset(reason)
-        if not self.frames:
+        if not self._continues(frame, inputs):
             motion = np.zeros_like(motion)  # nothing to warp from: the motion points into no frame we hold
         self.frames.appendleft((inputs, motion, jitter))
         held = list(self.frames)
@@ -137,11 +141,7 @@ class StatefulUpscaler:
         """:meth:`upscale` for a network that is only its base filter, run by the engine's CPU kernel
         (:func:`~volsr_core.runtime.base_filter.filter_image`) on TAAU's (H, W, 3) estimate as it comes."""
         colour = np.ascontiguousarray(frame.color, dtype=np.float32)
-        if self.frames:
-            reason = self._cut(frame, colour)
-            if reason:
-                self.reset(reason)
-        motion = frame.motion if self.frames else np.zeros_like(frame.motion)
+        motion = frame.motion if self._continues(frame, colour) else np.zeros_like(frame.motion)
         self.frames.appendleft((colour, motion, np.asarray(frame.jitter, dtype=np.float32)))
         base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth,
                             view_rotation(frame.camera, frame.previous_camera))

@@ -192,7 +192,7 @@ class SuperResolutionNet(nn.Module):
         b, frames, c, h, w = lr.shape
         if not cfg.widths:  # XS: the filtered base alone
             return self.base_filter(self.unfiltered_base(lr, history))
-        base = F.interpolate(lr[:, 0, :3], scale_factor=s, mode="bilinear", align_corners=False)
+        base = self.unfiltered_base(lr)  # the bilinear upscale; a TAAU-based network's history replaces it below
         feats = self.features(lr.reshape(b * frames, c, h, w)).reshape(b, frames, -1, h, w)
         hr_motion = [upsample_motion(motion[:, k], s) for k in range(max(n, int(cfg.recurrent)))]
         flows = accumulated_flows(hr_motion[:n])
