@@ -15,14 +15,19 @@ pytest.importorskip("onnxruntime")
 
 from volsr_core.errors import InputError  # noqa: E402
 from volsr_core.io import make_phantom  # noqa: E402
-from volsr_core.runtime.base_filter import FILTER_KEY, filter_image  # noqa: E402
+from volsr_core.render.features import FeatureFrame  # noqa: E402
+from volsr_core.render.layout import OUT_CHANNELS  # noqa: E402
+from volsr_core.runtime.base_filter import FILTER_KEY, Scratch, filter_image  # noqa: E402
 from volsr_core.runtime.engines import OnnxEngine  # noqa: E402
 from volsr_core.runtime.export import example_inputs, export_onnx  # noqa: E402
 from volsr_core.runtime.pipeline import Pipeline  # noqa: E402
+from volsr_core.runtime.upscaler import StatefulUpscaler  # noqa: E402
+from volsr_core.scene.camera import Camera  # noqa: E402
 from volsr_core.scene import Volume, get_preset  # noqa: E402
 from volsr_core.scene.camera_paths import orbit_around  # noqa: E402
 from volsr_core.sr.least_squares import fit_base_filter, is_closed_form  # noqa: E402
 from volsr_core.sr.network import BaseFilter, SuperResolutionNet, variant_config  # noqa: E402
+from volsr_core.temporal.taau import TemporalUpsampler, view_rotation  # noqa: E402
 
 
 def random_filter(net: SuperResolutionNet, seed: int = 0) -> SuperResolutionNet:
@@ -31,23 +36,43 @@ def random_filter(net: SuperResolutionNet, seed: int = 0) -> SuperResolutionNet:
     conv = net.base_filter.conv
     with torch.no_grad():
         conv.weight.add_(0.1 * torch.randn(conv.weight.shape, generator=g))
-        conv.bias.copy_(0.01 * torch.randn(3, generator=g))
+        conv.bias.copy_(0.01 * torch.randn(conv.bias.shape, generator=g))
     return net.eval()
 
 
-@pytest.mark.parametrize("kernel", (5, 9))
-def test_the_cpu_kernel_computes_what_the_network_filter_does(kernel):
-    """Values outside [0, 1] are clipped first and the border repeats its edge pixels, as in BaseFilter."""
+@pytest.mark.parametrize("kernel, orientations", [(5, 1), (9, 1), (5, 2)])
+def test_the_cpu_kernel_computes_what_the_network_filter_does(kernel, orientations):
+    """Values outside [0, 1] are clipped first and the border repeats its edge pixels, as in BaseFilter; a pair
+    picks each pixel's filter by the same orientation test."""
     g = torch.Generator().manual_seed(kernel)
-    layer = BaseFilter(kernel)
+    layer = BaseFilter(kernel, orientations)
     with torch.no_grad():
         layer.conv.weight.copy_(torch.randn(layer.conv.weight.shape, generator=g))
-        layer.conv.bias.copy_(torch.randn(3, generator=g))
-        image = torch.rand(1, 3, 37, 29, generator=g) * 1.6 - 0.3
+        layer.conv.bias.copy_(torch.randn(layer.conv.bias.shape, generator=g))
+        image = torch.nn.functional.interpolate(torch.rand(1, 3, 10, 8, generator=g), size=(37, 29), mode="bicubic")
+        image = image * 1.6 - 0.3
         expected = layer(torch.clamp(image, 0, 1))[0].numpy().transpose(1, 2, 0)
-    weights, bias = layer.conv.weight[:, 0].detach().numpy(), layer.conv.bias.detach().numpy()
+    weights, bias = (w.numpy() for w in layer.weights())
+    assert weights.shape == (orientations, 3, kernel, kernel) and bias.shape == (orientations, 3)
     got = filter_image(image[0].numpy().transpose(1, 2, 0), weights, bias)
     assert got.shape == (37, 29, 3) and np.abs(got - expected).max() < 1e-5
+
+
+@pytest.mark.parametrize("direction, second", [(1.0, 0.0), (-1.0, 1.0)])
+def test_a_pair_takes_its_second_filter_on_edges_running_from_top_left_to_bottom_right(direction, second):
+    """Stripes of constant x + y run from top right to bottom left (first filter), of constant x - y from top
+    left to bottom right (second), in the network and in the kernel alike."""
+    y, x = np.mgrid[0:40, 0:36].astype(np.float32)
+    stripes = 0.5 + 0.4 * np.sin(0.5 * (x + direction * y))
+    image = np.repeat(stripes[..., None], 3, axis=2)
+    layer = BaseFilter(5, 2)
+    with torch.no_grad():
+        layer.conv.weight[1::2].zero_()  # the second filter of each channel gives its bias: 1
+        layer.conv.bias.copy_(torch.tensor([0.0, 1.0] * 3))
+        network = layer(torch.from_numpy(image.transpose(2, 0, 1).copy())[None])[0].numpy().transpose(1, 2, 0)
+    kernel = filter_image(image, *(w.numpy() for w in layer.weights()))
+    for out in (network, kernel):
+        assert np.isclose(out, 1.0).mean() == second
 
 
 def test_an_xs_model_runs_its_filter_in_the_kernel_and_agrees_with_its_onnx_graph(tmp_path):
@@ -73,8 +98,8 @@ def test_damaged_filter_weights_in_the_metadata_are_a_one_line_error(tmp_path):
     onnx.save(graph, path)
     with pytest.raises(InputError) as caught:
         OnnxEngine(path, providers=["CPUExecutionProvider"])
-    assert str(caught.value) == (f"{path}: {FILTER_KEY}: expected finite weights of shape (3, 5, 5) and 3 biases, "
-                                 "got (1, 1, 1) and (3,)")
+    assert str(caught.value) == (f"{path}: {FILTER_KEY}: expected finite weights of shape (2, 3, 5, 5) and biases "
+                                 "of shape (2, 3), got (1, 1, 1) and (3,)")
 
 
 def test_the_upscaler_makes_the_same_frames_through_the_kernel_as_through_the_graph(tmp_path):
@@ -92,6 +117,44 @@ def test_the_upscaler_makes_the_same_frames_through_the_kernel_as_through_the_gr
         runs.append([pipeline.render(camera) for camera in cameras])
     for kernel_frame, graph_frame in zip(*runs):
         assert kernel_frame.shape == (48, 64, 3) and np.abs(kernel_frame - graph_frame).max() < 1e-5
+
+
+def test_work_buffers_kept_between_frames_change_no_result():
+    rng = np.random.default_rng(5)
+    weights, bias = rng.normal(0, 0.2, (2, 3, 5, 5)).astype(np.float32), rng.normal(0, 0.1, (2, 3)).astype(np.float32)
+    scratch = Scratch()
+    for shape in ((20, 18, 3), (20, 18, 3), (11, 13, 3)):
+        image = rng.random(shape, dtype=np.float32)
+        assert np.array_equal(filter_image(image, weights, bias, scratch=scratch), filter_image(image, weights, bias))
+        assert np.array_equal(filter_image(image, weights[:1], bias[:1], scratch=scratch),
+                              filter_image(image, weights[:1], bias[:1]))
+
+
+def test_an_xs_model_told_the_fineness_filters_the_smoothed_taau_and_an_older_one_the_plain_one(tmp_path):
+    """Frames 3 output pixels per voxel fine while the view rotates: XS 2x (told, as trained) filters what TAAU
+    told the frame's pixels per voxel makes; an XS model without ``taau_fine_sampling`` what TAAU untold makes.
+    Both start as the identity, so each upscaler's output is its TAAU's estimate."""
+    paths = {told: export_onnx(SuperResolutionNet(variant_config("XS", 2, taau_base=True, taau_fine_sampling=told)),
+                               tmp_path / f"xs-{told}.onnx") for told in (True, False)}
+    upscalers = {told: StatefulUpscaler(OnnxEngine(path, providers=["CPUExecutionProvider"]))
+                 for told, path in paths.items()}
+    assert all(u.base_filter is not None for u in upscalers.values())
+    references = {True: TemporalUpsampler(2), False: TemporalUpsampler(2)}
+    rng = np.random.default_rng(6)
+    cameras = [Camera(position=np.array([np.sin(a), 0.0, np.cos(a)])) for a in np.radians([0.0, 2.0, 4.0])]
+    for k, camera in enumerate(cameras):
+        data = rng.random((9, 8, OUT_CHANNELS), dtype=np.float32)
+        previous = cameras[k - 1] if k else None
+        frame = FeatureFrame(data, camera, jitter=(0.2 * k - 0.3, 0.1), previous_camera=previous,
+                             pixels_per_voxel=1.5)
+        frame.motion[...] = 0.0 if k == 0 else 0.4
+        outs = {}
+        for told, upscaler in upscalers.items():
+            expected = references[told](frame.color, frame.motion, frame.jitter, frame.motion_depth,
+                                        view_rotation(camera, previous), 1.5 if told else None)
+            outs[told] = upscaler.upscale(frame)
+            assert np.abs(outs[told] - np.clip(expected, 0, 1)).max() < 1e-5
+        assert k == 0 or np.abs(outs[True] - outs[False]).max() > 1e-2
 
 
 class FrameSet:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -17,8 +18,9 @@ from volsr_core.cli import main
 from volsr_core.errors import InputError
 from volsr_core.dataset.config import read_config
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
-from volsr_core.dataset.videos import generate, plan_videos
-from volsr_core.dataset.store import store_layout, validate_manifest
+from volsr_core.dataset.videos import generate, load_dataset_volume, plan_videos
+from volsr_core.dataset.store import frame_pixels_per_voxel, store_layout, validate_manifest
+from volsr_core.scene.camera import Camera
 
 REPO = Path(__file__).resolve().parents[1]
 VIDEOS_PER_VOLUME = 3
@@ -134,6 +136,38 @@ def test_stores_hold_the_documented_datasets(reference):
             cameras = h5["cameras"][:]
             np.testing.assert_allclose(cameras[:, :3], [c["position"] for c in video["cameras"]])
             assert np.all(cameras[:, 14:] == 0)
+
+
+def test_frames_pixels_per_voxel_is_the_renderers(config_file, reference):
+    """Each video records its volume's smallest spacing; with a frame's camera it gives the renderer's own
+    FeatureFrame.pixels_per_voxel at any image height."""
+    config = read_config(config_file)
+    names = [v.name for v in config.volumes]
+    manifest = json.loads((reference / "manifest.json").read_text())
+    for video in manifest["videos"][::VIDEOS_PER_VOLUME]:
+        source = load_dataset_volume(config, names.index(video["volume"]))
+        assert video["voxel_size"] == pytest.approx(min(source.volume.spacing))
+        for height in (32, 16):
+            rendered = source.caster.render(Camera.from_dict(video["cameras"][2]), height, height).pixels_per_voxel
+            assert frame_pixels_per_voxel(video, height)[2] == pytest.approx(rendered, rel=1e-9)
+    assert frame_pixels_per_voxel({"cameras": video["cameras"]}, 16) == [None] * len(video["cameras"])
+
+
+def test_a_run_records_the_voxel_size_of_older_videos_without_rendering(config_file, reference, tmp_path):
+    out = tmp_path / "older"
+    shutil.copytree(reference, out)
+    entry_path = out / "videos" / "v0004.json"
+    entry = json.loads(entry_path.read_text())
+    recorded = entry.pop("voxel_size")
+    entry_path.write_text(json.dumps(entry))
+    stores = {p: p.stat().st_mtime_ns for p in (out / "videos").glob("*.h5")}
+    lines = []
+    manifest = generate(read_config(config_file), out, log=lines.append, progress=False)
+    assert any("recorded the voxel size of 1 video(s)" in line for line in lines)
+    assert {p: p.stat().st_mtime_ns for p in (out / "videos").glob("*.h5")} == stores
+    assert json.loads(entry_path.read_text())["voxel_size"] == recorded
+    assert [v["voxel_size"] for v in manifest["videos"] if v["id"] == "v0004"] == [recorded]
+    validate_manifest(out / "manifest.json", checksums=False)
 
 
 def test_sigkill_then_resume_equals_an_uninterrupted_run(config_file, reference, tmp_path):

@@ -88,3 +88,22 @@ def test_pick_history_and_the_feed_follow_the_networks_configuration():
     plain = HistoryFeed(variant_config("S", 2, 2))
     plain.keep(output)
     assert plain.mode == "none" and plain(colour, motion, (0.0, 0.0)) is None
+
+
+def test_only_a_fine_sampling_network_tells_its_taau_the_pixels_per_voxel():
+    """A fine frame (3 output pixels per voxel) while the view rotates: TAAU smooths it when told, so the feed
+    of a ``taau_fine_sampling`` network matches TAAU told, and an older network's matches TAAU not told."""
+    rng = np.random.default_rng(4)
+    frames = [(rng.random((6, 7, 3), dtype=np.float32), rng.normal(0, 0.3, (6, 7, 2)).astype(np.float32), jitter)
+              for jitter in ((0.1, -0.2), (-0.3, 0.25), (0.2, 0.1))]
+    told = HistoryFeed(variant_config("XS", 2, taau_base=True, taau_fine_sampling=True))
+    untold = HistoryFeed(variant_config("XS", 2, taau_base=True))
+    smoothing, plain = TemporalUpsampler(2), TemporalUpsampler(2)
+    for colour, motion, jitter in frames:
+        fine = told(colour, motion, jitter, None, 2.0, 1.5)
+        coarse = untold(colour, motion, jitter, None, 2.0, 1.5)
+        assert np.array_equal(fine, smoothing(colour, motion, jitter, None, 2.0, 1.5))
+        assert np.array_equal(coarse, plain(colour, motion, jitter, None, 2.0))
+        assert not np.allclose(fine, coarse)
+    with pytest.raises(ValueError, match="taau_fine_sampling"):
+        variant_config("S", 2, taau_fine_sampling=True)

@@ -200,7 +200,8 @@ def test_a_network_config_reads_back_from_its_dict_and_refuses_unknown_keys():
     assert NetworkConfig.from_dict({"scale": 2, "fold": 2}) == NetworkConfig(scale=2, fold=2)  # defaults filled
     with pytest.raises(InputError, match=r"^m.pt: network.colour: unknown key \(allowed: scale, previous_frames, "
                                          r"features, fold, widths, reweight_width, feature_width, recurrent, "
-                                         r"taau_base, taau_aux, base_kernel\)$"):
+                                         r"taau_base, taau_aux, base_kernel, base_orientations, "
+                                         r"taau_fine_sampling\)$"):
         NetworkConfig.from_dict({**config.to_dict(), "colour": True}, source="m.pt", key="network")
     with pytest.raises(InputError, match=r"^m.pt: network.widths\[0\]: expected an integer, got str '8'$"):
         NetworkConfig.from_dict({"widths": ["8"]}, source="m.pt", key="network")
@@ -236,7 +237,7 @@ def test_onnx_metadata_with_an_unknown_key_is_a_one_line_error(tmp_path):
         OnnxEngine(path, providers=["CPUExecutionProvider"])
     assert str(caught.value) == (f"{path}: volsr.network.colour: unknown key (allowed: scale, previous_frames, "
                                  "features, fold, widths, reweight_width, feature_width, recurrent, taau_base, taau_aux, "
-                                 "base_kernel)")
+                                 "base_kernel, base_orientations, taau_fine_sampling)")
 
 
 # -- variant XS: a learned filter on the base --------------------------------------------------------
@@ -245,7 +246,8 @@ def test_variant_xs_starts_as_taau_exactly_and_filters_the_bilinear_upscale_with
     config = variant_config("XS", scale, previous_frames=2, taau_base=True, taau_aux=True)
     assert (config.widths, config.base_kernel, config.previous_frames, config.taau_aux) == ((), 2 * scale + 1, 0, False)
     net = SuperResolutionNet(config).eval()
-    assert sum(p.numel() for p in net.parameters()) == 3 * (2 * scale + 1) ** 2 + 3
+    assert sum(p.numel() for p in net.parameters()) == config.base_orientations * (3 * (2 * scale + 1) ** 2 + 3)
+    assert config.base_orientations == (2 if scale == 2 else 1)
     lr, motion, jitter = inputs(config, 7, 5, batch=1)[:3]
     history = torch.rand(1, config.history_channels, 7 * scale, 5 * scale)
     with torch.no_grad():
@@ -263,6 +265,8 @@ def test_a_network_without_a_u_net_needs_a_base_filter_and_no_previous_frames():
         NetworkConfig(scale=2, previous_frames=1, fold=2, widths=(), base_kernel=5)
     with pytest.raises(ValueError, match="odd"):
         NetworkConfig(scale=2, previous_frames=0, fold=2, base_kernel=4)
+    with pytest.raises(ValueError, match="base_orientations"):
+        NetworkConfig(scale=2, previous_frames=0, fold=2, base_orientations=2)
 
 
 def test_the_base_filter_learns_to_undo_a_known_blur():

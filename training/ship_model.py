@@ -17,6 +17,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 MODELS = REPO / "resources" / "models"
 LIMIT_BYTES = 10 * 1024 * 1024
+RISK = "the network invents plausible detail that was not rendered"
+RISK_XS = ("the filter sharpens what TAAU made (it invents no structure, but it can ring along edges and lift "
+           "noise)")
 
 
 def metrics_table(path: Path) -> list[str]:
@@ -71,13 +74,14 @@ def main() -> None:
             f"VolSR variant {args.variant}, {cfg.scale}x per axis, {'recurrent, ' if cfg.recurrent else ''}"
             f"{'TAAU-based (refines the TAAU estimate of each frame; the upscaler runs TAAU before it), ' if cfg.taau_base else ''}"
             f"{'seeing what TAAU threw away (the reprojected history and its share of the blend), ' if cfg.taau_aux else ''}"
+            f"{'its TAAU told how finely frames sample the volume, ' if cfg.taau_fine_sampling else ''}"
             f"{cfg.previous_frames} previous frames, inputs {', '.join(cfg.features)}; "
             f"{entry['parameters']:,} parameters. Files: `{pt.name}` ({pt.stat().st_size / 2**20:.2f} MiB, weights "
             f"only, `torch.load(weights_only=True)`), `{onnx_path.name}` ({onnx_path.stat().st_size / 2**20:.2f} MiB, "
             f"opset {OPSET}, dynamic height and width). SHA-256 in `models.json`, checked at load.", "",
             "**Intended use: interactive visualisation (upscaling direct volume renderings while the camera moves). "
-            "Not for diagnosis:** the network invents plausible detail that was not rendered, and it was "
-            "trained on a handful of volumes.", "",
+            f"Not for diagnosis:** {RISK_XS if not cfg.widths else RISK}, and it was trained on a handful of volumes.",
+            "",
             "## Training", "", f"Config `{args.config.resolve().relative_to(REPO).as_posix()}`:", "", "```yaml",
             args.config.read_text().strip(), "```", "", args.card_notes.strip(), "", "## Metrics", ""]
     for path in args.eval:

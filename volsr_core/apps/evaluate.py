@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from volsr_core.atomic import atomic_write
-from volsr_core.dataset.store import view_rotations
+from volsr_core.dataset.store import frame_pixels_per_voxel, view_rotations
 from volsr_core.runtime.methods import ReducedSize, Taau
 from volsr_core.sr.history import HistoryFeed
 from volsr_core.sr.loader import SequenceDataset
@@ -48,9 +48,10 @@ def temporal_error(out_prev: np.ndarray, out: np.ndarray, gt_prev: np.ndarray, g
 
 class VideoFrames:
     """One video's LR frames at one scale (jittered colour, motion, jitter, motion depth, and the unjittered
-    ``centred`` colour when the store has it: version 2), view rotations and HR ground truth, from its store."""
+    ``centred`` colour when the store has it: version 2), view rotations, pixels per voxel (None unless the
+    JSON ``entry`` records ``voxel_size``) and HR ground truth, from its store."""
 
-    def __init__(self, path: Path, scale: int):
+    def __init__(self, path: Path, scale: int, entry: dict[str, Any] | None = None):
         with h5py.File(path, "r") as h5:
             self.lr = h5[f"lr{scale}/color"][()].astype(np.float32)
             self.motion = h5[f"lr{scale}/motion"][()].astype(np.float32)
@@ -60,10 +61,13 @@ class VideoFrames:
             self.centred = h5[f"lr{scale}/centred"][()].astype(np.float32) if f"lr{scale}/centred" in h5 else None
             self.rotation = view_rotations(h5["cameras"][()])
             self.hr = h5["hr/color"][()].astype(np.float32)
+        self.pixels_per_voxel = (frame_pixels_per_voxel(entry, self.lr.shape[1]) if entry is not None
+                                 else [None] * len(self.lr))
 
     def taau_inputs(self, t: int) -> tuple:
-        """Frame t as TAAU takes it: colour, motion, jitter, depth, rotation."""
-        return self.lr[t], self.motion[t], tuple(self.jitter[t]), self.depth[t], float(self.rotation[t])
+        """Frame t as TAAU takes it: colour, motion, jitter, depth, rotation, pixels per voxel."""
+        return (self.lr[t], self.motion[t], tuple(self.jitter[t]), self.depth[t], float(self.rotation[t]),
+                self.pixels_per_voxel[t])
 
     def hr_motion(self, t: int, scale: int) -> np.ndarray:
         return upscale_bilinear(self.motion[t], scale) * scale
@@ -109,7 +113,7 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
         iterator = tqdm(list(iterator), desc=f"eval {split}", unit="video")
     for video_index, indices in iterator:
         meta = data.videos[video_index]
-        frames = VideoFrames(data.root / meta["file"], cfg.scale)
+        frames = VideoFrames(data.root / meta["file"], cfg.scale, meta)
         methods = _baselines(frames, cfg.scale)
         network_out: dict[int, np.ndarray] = {}
         feed = HistoryFeed(cfg)

@@ -59,6 +59,17 @@ def view_rotations(cameras: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.degrees(np.arccos(cos))])
 
 
+def frame_pixels_per_voxel(entry: Mapping[str, Any], height: int) -> list[float | None]:
+    """Per frame of a video's JSON ``entry``, how many pixels of an image ``height`` pixels tall the volume's
+    smallest voxel spacing spans at the focal point (as the renderer's ``FeatureFrame.pixels_per_voxel``);
+    None for each frame of an entry written before videos recorded ``voxel_size``."""
+    from volsr_core.scene.camera import Camera
+
+    voxel = entry.get("voxel_size")
+    return [None if voxel is None else float(voxel) / Camera.from_dict(c).pixel_size_at_focus(height)
+            for c in entry["cameras"]]
+
+
 def raw_bytes(layout: Mapping[str, tuple[tuple, np.dtype]]) -> int:
     """Bytes of all datasets before compression."""
     return sum(int(np.prod(shape)) * dtype.itemsize for shape, dtype in layout.values())

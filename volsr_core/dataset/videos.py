@@ -38,7 +38,7 @@ from volsr_core.scene.camera_paths import candidate_pool, random_start, smooth_r
 from volsr_core.scene.presets import place_on_volume
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
-from volsr_core.dataset.config import PHANTOM, SPLITS, DatasetConfig
+from volsr_core.dataset.config import PHANTOM, SPLITS, DatasetConfig, VolumeSpec
 from volsr_core.temporal.ground_truth import ground_truth_frames
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
 from volsr_core.dataset.store import (
@@ -122,17 +122,21 @@ class DatasetVolume:
     pool: list[Camera]
 
 
+def load_volume(spec: VolumeSpec) -> Volume:
+    """The volume a config entry names: its file, or the phantom of its shape."""
+    from volsr_core.io import make_phantom
+
+    if spec.path == PHANTOM:
+        return Volume.from_record(make_phantom(shape=spec.phantom_shape))
+    return Volume.load(spec.source)
+
+
 def load_dataset_volume(config: DatasetConfig, volume_index: int, device: str = "cpu") -> DatasetVolume:
     """Load the volume ``volume_index`` of the config and place its transfer function on it:
     the design range onto ``range`` [lo, hi], ``auto`` as :func:`place_on_volume` (kept for HU
     presets on HU volumes, else onto the volume's 0.5-99.5 percentiles), kept without ``range``."""
-    from volsr_core.io import make_phantom
-
     spec = config.volumes[volume_index]
-    if spec.path == PHANTOM:
-        volume = Volume.from_record(make_phantom(shape=spec.phantom_shape))
-    else:
-        volume = Volume.load(spec.source)
+    volume = load_volume(spec)
     tf = place_on_volume(TransferFunction.from_dict(spec.tf_definition), volume, spec.transfer_function["range"])
     pool_args = dict(config.pool)
     n = pool_args.pop("pool_size")
@@ -200,13 +204,35 @@ def write_video(config: DatasetConfig, source: DatasetVolume, plan: VideoPlan, o
     entry = {"id": plan.id, "file": plan.file, "volume": source.name, "split": plan.split,
              "frames": config.frames_per_video, "hr_size": list(config.hr_size), "scales": list(config.scales),
              "transfer_function": source.transfer_function.to_dict(), "cameras": [c.to_dict() for c in cameras],
-             "ground_truth": dict(config.ground_truth), "checksums": writer.checksums,
-             "fingerprint": plan.fingerprint}
+             "voxel_size": voxel_size(source.volume), "ground_truth": dict(config.ground_truth),
+             "checksums": writer.checksums, "fingerprint": plan.fingerprint}
     write_json(out / plan.entry, entry)
     return entry
 
 
+def voxel_size(volume: Volume) -> float:
+    """mm: the volume's smallest voxel spacing, what a frame's pixels per voxel count
+    (:func:`~volsr_core.dataset.store.frame_pixels_per_voxel`)."""
+    return float(min(volume.spacing))
+
+
 # resuming and the manifest -----------------------------------------------------------------------
+def record_voxel_sizes(config: DatasetConfig, out: Path, plans: list[VideoPlan]) -> int:
+    """Add ``voxel_size`` to the JSON entries of complete videos written before entries had it (loading
+    each volume once, rendering nothing); returns how many entries were updated."""
+    sizes: dict[int, float] = {}
+    updated = 0
+    for plan in plans:
+        entry = read_json(out / plan.entry)
+        if not is_complete(out, plan) or "voxel_size" in entry:
+            continue
+        if plan.volume_index not in sizes:
+            sizes[plan.volume_index] = voxel_size(load_volume(config.volumes[plan.volume_index]))
+        write_json(out / plan.entry, {**entry, "voxel_size": sizes[plan.volume_index]})
+        updated += 1
+    return updated
+
+
 def is_complete(out: Path, plan: VideoPlan) -> bool:
     """Cheap check: the store and the JSON entry exist and the entry's fingerprint is the plan's."""
     entry = read_json(out / plan.entry)
@@ -343,6 +369,9 @@ def generate(config: DatasetConfig, out: str | Path, shard: tuple[int, int] = (0
     mine = [p for p in plans if p.number % shard[1] == shard[0]]
     remove_stale_parts(out, shard)
     todo = [p for p in mine if not is_complete(out, p)]
+    recorded = record_voxel_sizes(config, out, mine)
+    if recorded:
+        log(f"{out}: recorded the voxel size of {recorded} video(s) made before videos recorded it")
     source = load_dataset_volume(config, todo[0].volume_index, device) if todo else None
     measured = measure(config, source, camera_path(config, source, todo[0])) if source else None
     log(plan_text(config, plans, mine, todo, shard, measured, source.name if source else "", device))

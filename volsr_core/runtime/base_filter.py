@@ -2,12 +2,15 @@
 
 A VolSR model whose network is only its base filter (:class:`~volsr_core.sr.network.BaseFilter`,
 variant XS) is one depthwise k x k convolution of the base clipped to [0, 1], edge pixels repeated
-past the border. :func:`filter_image` does it on images laid out as TAAU makes them, so the
-upscaler needs no network inputs and no transposes for it: one pass lays the clipped, padded
-channels apart, a second sums each tap over whole rows (the loops vectorise) and interleaves the
-result. 1.0 ms for a 5x5 filter and 2.8 ms for a 9x9 one on a 512² frame (2 cores), where
-onnxruntime's depthwise Conv takes 2.4 and 10.8 ms without its transposes. The weights travel in
-the ONNX file's metadata (:data:`FILTER_KEY`, written by :func:`~volsr_core.runtime.export.
+past the border, or a pair of them, each pixel taking the one its local orientation picks
+(:func:`~volsr_core.sr.network.second_orientation`, the same stages here). :func:`filter_image` does it
+on images laid out as TAAU makes them, so the upscaler needs no network inputs and no transposes for
+it: one pass lays the clipped, padded channels apart, a second sums each tap over whole rows (the
+loops vectorise; a pair sums both filters) and interleaves the result; work buffers stay in a
+:class:`Scratch` between frames. On a 512² frame (2 cores, medians of 80 calls): 1.5 ms for a 5x5
+filter, 3.3 ms for a 5x5 pair; an earlier measurement gave 2.8 ms for a 9x9 filter, where
+onnxruntime's depthwise Conv takes 2.4 (5x5) and 10.8 ms (9x9) without its transposes. The weights
+travel in the ONNX file's metadata (:data:`FILTER_KEY`, written by :func:`~volsr_core.runtime.export.
 export_onnx`); the graph stays the reference the kernel is tested against.
 """
 from __future__ import annotations
@@ -19,71 +22,155 @@ import numba
 import numpy as np
 
 from volsr_core.errors import InputError
+from volsr_core.sr.network_config import ORIENTATION_LUMA, ORIENTATION_SMOOTHING
 
-FILTER_KEY = "volsr.base_filter"  # ONNX metadata: {"weights": (3, k, k) nested lists, "bias": 3 numbers}
+FILTER_KEY = "volsr.base_filter"  # ONNX metadata: {"weights": (3, k, k) or (2, 3, k, k) nested lists, "bias": 3 or 2x3}
+LUMA = np.asarray(ORIENTATION_LUMA, dtype=np.float32)
+SMOOTHING = np.asarray(ORIENTATION_SMOOTHING, dtype=np.float32)
+
+
+class Scratch:
+    """Work buffers :func:`filter_image` keeps between calls on frames of one size: fresh multi-MB arrays
+    every frame cost page faults (about as much as the filter itself at 512²). One per caller (not shared
+    between threads)."""
+
+    def __init__(self) -> None:
+        self._buffers: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, shape: tuple[int, ...], dtype: type = np.float32) -> np.ndarray:
+        """The buffer ``name`` of ``shape`` (contents undefined), made anew only when the shape changes."""
+        buffer = self._buffers.get(name)
+        if buffer is None or buffer.shape != shape:
+            buffer = self._buffers[name] = np.empty(shape, dtype)
+        return buffer
 
 
 @numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
-def _padded_planes(image: np.ndarray, r: int) -> np.ndarray:
-    """(C, H + 2r, W + 2r): ``image`` (H, W, C) clipped to [0, 1], channels apart, edge pixels repeated."""
+def _padded_planes(image: np.ndarray, r: int, planes: np.ndarray) -> None:
+    """``planes`` (C, H + 2r, W + 2r) from ``image`` (H, W, C): clipped to [0, 1], channels apart, edge
+    pixels repeated."""
     height, width, channels = image.shape
-    planes = np.empty((channels, height + 2 * r, width + 2 * r), np.float32)
     for y in numba.prange(height + 2 * r):
         sy = min(max(y - r, 0), height - 1)
         for x in range(width + 2 * r):
             sx = min(max(x - r, 0), width - 1)
             for c in range(channels):
                 planes[c, y, x] = min(max(image[sy, sx, c], np.float32(0.0)), np.float32(1.0))
-    return planes
 
 
 @numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
-def _filter_rows(planes: np.ndarray, weights: np.ndarray, bias: np.ndarray, out: np.ndarray) -> None:
-    """``out`` (H, W, C) from ``planes`` (:func:`_padded_planes`), a row at a time: each tap's loop over
-    the row into a per-channel accumulator (it vectorises), the accumulators interleaved into ``out``."""
-    height, width, channels = out.shape
-    k = weights.shape[1]
+def _second_orientation(planes: np.ndarray, pad: int, luma_weights: np.ndarray, taps: np.ndarray,
+                        luma: np.ndarray, across: np.ndarray, second: np.ndarray) -> None:
+    """``second`` (H, W) uint8, 1 where a filter pair uses its second filter, from ``planes``
+    (:func:`_padded_planes` with ``pad`` >= 1; ``luma`` and ``across`` are work buffers of the padded and
+    the image's size): the stages of :func:`~volsr_core.sr.network.second_orientation` (luma of the clipped
+    image, central differences, their product smoothed along x, then y, edge pixels repeated at each step,
+    negative), laid out so that the inner loops need no index clamps (they vectorise)."""
+    channels, padded_height, padded_width = planes.shape
+    height, width = padded_height - 2 * pad, padded_width - 2 * pad
+    r = taps.shape[0] // 2
+    for y in numba.prange(padded_height):
+        row = luma[y]
+        row[:] = luma_weights[0] * planes[0, y]
+        for c in range(1, channels):
+            weight, source = luma_weights[c], planes[c, y]
+            for x in range(padded_width):
+                row[x] += weight * source[x]
     for y in numba.prange(height):
-        accumulator = np.empty((channels, width), np.float32)
-        for c in range(channels):
-            row = accumulator[c]
-            row[:] = bias[c]
-            for dy in range(k):
-                source = planes[c, y + dy]
-                for dx in range(k):
-                    weight = weights[c, dy, dx]
-                    for x in range(width):
-                        row[x] += weight * source[x + dx]
+        here, up, down = luma[y + pad], luma[y + pad - 1], luma[y + pad + 1]
+        product = np.empty(width + 2 * r, np.float32)  # r repeated edge values each side
         for x in range(width):
+            product[x + r] = (np.float32(0.5) * (here[x + pad + 1] - here[x + pad - 1]) * np.float32(0.5)
+                              * (down[x + pad] - up[x + pad]))
+        for i in range(r):
+            product[i], product[width + r + i] = product[r], product[width + r - 1]
+        out = across[y]
+        out[:] = np.float32(0.0)
+        for i in range(taps.shape[0]):
+            tap = taps[i]
+            for x in range(width):
+                out[x] += tap * product[x + i]
+    for y in numba.prange(height):
+        smoothed = np.zeros(width, np.float32)
+        for i in range(taps.shape[0]):
+            tap, source = taps[i], across[min(max(y + i - r, 0), height - 1)]
+            for x in range(width):
+                smoothed[x] += tap * source[x]
+        for x in range(width):
+            second[y, x] = smoothed[x] < 0
+
+
+@numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
+def _filter_rows(planes: np.ndarray, weights: np.ndarray, bias: np.ndarray, second: np.ndarray,
+                 out: np.ndarray) -> None:
+    """``out`` (H, W, C) from ``planes`` (:func:`_padded_planes`), a row at a time: each filter's taps looped
+    over the row into a per-channel accumulator (it vectorises), the accumulators interleaved into ``out``,
+    each pixel from filter ``second[y, x]`` when there are two (``weights`` (n, C, k, k), ``bias`` (n, C))."""
+    height, width, channels = out.shape
+    n, k = weights.shape[0], weights.shape[2]
+    for y in numba.prange(height):
+        accumulator = np.empty((n, channels, width), np.float32)
+        for m in range(n):
             for c in range(channels):
-                out[y, x, c] = accumulator[c, x]
+                row = accumulator[m, c]
+                row[:] = bias[m, c]
+                for dy in range(k):
+                    source = planes[c, y + dy]
+                    for dx in range(k):
+                        weight = weights[m, c, dy, dx]
+                        for x in range(width):
+                            row[x] += weight * source[x + dx]
+        for x in range(width):
+            m = second[y, x] if n > 1 else 0
+            for c in range(channels):
+                out[y, x, c] = accumulator[m, c, x]
 
 
-def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray) -> np.ndarray:
-    """``image`` (H, W, C), clipped to [0, 1] and edge-padded, through ``weights`` (C, k, k) and ``bias``
-    (C,): a new (H, W, C) float32 image, what the network's BaseFilter computes (channels first there)."""
-    planes = _padded_planes(np.ascontiguousarray(image, dtype=np.float32), weights.shape[1] // 2)
+def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
+                 scratch: Scratch | None = None) -> np.ndarray:
+    """``image`` (H, W, 3), clipped to [0, 1] and edge-padded, through ``weights`` (n, 3, k, k) and ``bias``
+    (n, 3), n = 1 or a pair chosen per pixel by orientation: a new (H, W, 3) float32 image, what the network's
+    :class:`~volsr_core.sr.network.BaseFilter` computes (channels first there). ``scratch`` keeps the work
+    buffers for the next call (a fresh set each call without it)."""
+    scratch = Scratch() if scratch is None else scratch
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    weights = np.ascontiguousarray(weights, dtype=np.float32)
+    height, width = image.shape[:2]
+    pad = weights.shape[2] // 2
+    planes = scratch.get("planes", (3, height + 2 * pad, width + 2 * pad))
+    _padded_planes(image, pad, planes)
+    if weights.shape[0] > 1:
+        second = scratch.get("second", (height, width), np.uint8)
+        _second_orientation(planes, pad, LUMA, SMOOTHING, scratch.get("luma", planes.shape[1:]),
+                            scratch.get("across", (height, width)), second)
+    else:
+        second = scratch.get("second", (1, 1), np.uint8)
     out = np.empty(image.shape, np.float32)
-    _filter_rows(planes, np.ascontiguousarray(weights, dtype=np.float32), np.asarray(bias, dtype=np.float32), out)
+    _filter_rows(planes, weights, np.asarray(bias, dtype=np.float32), second, out)
     return out
 
 
 def filter_metadata(weights: np.ndarray, bias: np.ndarray) -> str:
-    """The :data:`FILTER_KEY` metadata value for ``weights`` (3, k, k) and ``bias`` (3,)."""
-    return json.dumps({"weights": np.asarray(weights, dtype=float).tolist(), "bias": np.asarray(bias, dtype=float).tolist()})
+    """The :data:`FILTER_KEY` metadata value for ``weights`` (n, 3, k, k) and ``bias`` (n, 3); one filter is
+    written (3, k, k) and (3,), as models made before filter pairs hold it."""
+    weights, bias = np.asarray(weights, dtype=float), np.asarray(bias, dtype=float)
+    if weights.shape[0] == 1:
+        weights, bias = weights[0], bias[0]
+    return json.dumps({"weights": weights.tolist(), "bias": bias.tolist()})
 
 
-def read_filter_metadata(text: str, path: Path, kernel: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(weights (3, kernel, kernel), bias (3,))`` float32 from a :data:`FILTER_KEY` value; a one-line
-    InputError naming ``path`` when it is not that."""
+def read_filter_metadata(text: str, path: Path, kernel: int, orientations: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """``(weights (orientations, 3, kernel, kernel), bias (orientations, 3))`` float32 from a
+    :data:`FILTER_KEY` value; a one-line InputError naming ``path`` when it is not that."""
     try:
         mapping = json.loads(text)
         weights = np.asarray(mapping["weights"], dtype=np.float32)
         bias = np.asarray(mapping["bias"], dtype=np.float32)
     except (ValueError, KeyError, TypeError) as err:
         raise InputError(path, f"{FILTER_KEY}: not the filter's weights and bias ({err})") from None
-    if weights.shape != (3, kernel, kernel) or bias.shape != (3,) or not (np.isfinite(weights).all()
-                                                                          and np.isfinite(bias).all()):
-        raise InputError(path, f"{FILTER_KEY}: expected finite weights of shape (3, {kernel}, {kernel}) and 3 "
-                         f"biases, got {weights.shape} and {bias.shape}")
-    return weights, bias
+    expected = (3, kernel, kernel) if orientations == 1 else (orientations, 3, kernel, kernel)
+    if weights.shape != expected or bias.shape != expected[:-2] or not (np.isfinite(weights).all()
+                                                                        and np.isfinite(bias).all()):
+        raise InputError(path, f"{FILTER_KEY}: expected finite weights of shape {expected} and biases of shape "
+                         f"{expected[:-2]}, got {weights.shape} and {bias.shape}")
+    return weights.reshape(orientations, 3, kernel, kernel), bias.reshape(orientations, 3)

@@ -86,9 +86,10 @@ class OnnxEngine:
             raise InputError(self.path, f"an ONNX model without VolSR metadata ('{METADATA_KEY}')")
         self.config = _network_config(meta[METADATA_KEY], self.path)
         self.input_names = [i.name for i in self.session.get_inputs()]
-        self.base_filter = None  # (weights (3, k, k), bias (3,)) when the CPU kernel runs the network
+        self.base_filter = None  # (weights (n, 3, k, k), bias (n, 3)) when the CPU kernel runs the network
         if not self.config.widths and FILTER_KEY in meta and self.providers[0] == "CPUExecutionProvider":
-            self.base_filter = read_filter_metadata(meta[FILTER_KEY], self.path, self.config.base_kernel)
+            self.base_filter = read_filter_metadata(meta[FILTER_KEY], self.path, self.config.base_kernel,
+                                                    self.config.base_orientations)
 
     def __call__(self, lr: np.ndarray, motion: np.ndarray, jitter: np.ndarray,
                  history: np.ndarray | None = None) -> np.ndarray:

@@ -92,8 +92,7 @@ def export_onnx(model: SuperResolutionNet, path: str | os.PathLike, example_size
     entry.key, entry.value = METADATA_KEY, json.dumps(config.to_dict())
     if model.base_filter is not None:  # its weights again, for the CPU kernel (runtime/base_filter.py)
         entry = graph.metadata_props.add()
-        conv = model.base_filter.conv
-        entry.key, entry.value = FILTER_KEY, filter_metadata(conv.weight.detach()[:, 0].numpy(), conv.bias.detach().numpy())
+        entry.key, entry.value = FILTER_KEY, filter_metadata(*(w.numpy() for w in model.base_filter.weights()))
     graph.producer_name = "volsr"
     with atomic_write(path) as fh:
         fh.write(graph.SerializeToString())

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from volsr_core.render.features import FeatureFrame
-from volsr_core.runtime.base_filter import filter_image
+from volsr_core.runtime.base_filter import Scratch, filter_image
 from volsr_core.scene.camera import Camera, rotation_between
 from volsr_core.sr.history import HistoryFeed
 from volsr_core.temporal.resample import upscale_bilinear
@@ -76,6 +76,7 @@ class StatefulUpscaler:
         self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=self.config.previous_frames + 1)
         self.history = HistoryFeed(self.config)
         self.base_filter = getattr(engine, "base_filter", None)  # variant XS on the CPU: no network inputs
+        self._scratch = Scratch()
         self.resets = 0
         self.last_reset_reason = ""
 
@@ -87,12 +88,16 @@ class StatefulUpscaler:
         self.last_reset_reason = reason
 
     def _implausible(self, motion: np.ndarray) -> str:
+        """Both statistics over every ``step``-th pixel each way (about 64 x 64 of them): frame-wide fractions
+        that need no more, at a sixteenth of the cost on a 256² frame."""
         h, w = motion.shape[:2]
-        squared = np.square(motion[..., 0]) + np.square(motion[..., 1])  # the median of lengths, squared
+        step = max(1, min(h, w) // 64)
+        sample = motion[::step, ::step]
+        squared = np.square(sample[..., 0]) + np.square(sample[..., 1])  # the median of lengths, squared
         if np.median(squared) > (self.max_motion * np.hypot(h, w)) ** 2:
             return "large motion"
-        x = np.arange(w, dtype=np.float32)[None, :] + 0.5 + motion[..., 0]
-        y = np.arange(h, dtype=np.float32)[:, None] + 0.5 + motion[..., 1]
+        x = np.arange(0, w, step, dtype=np.float32)[None, :] + 0.5 + sample[..., 0]
+        y = np.arange(0, h, step, dtype=np.float32)[:, None] + 0.5 + sample[..., 1]
         if np.mean((x < 0) | (x > w) | (y < 0) | (y > h)) > self.max_offscreen:
             return "motion leaves the screen"
         return ""
@@ -130,7 +135,8 @@ class StatefulUpscaler:
         vectors = np.stack([f[1] for f in held])[None]
         jitters = np.stack([f[2] for f in held])[None]
         history = self.history(frame.color, motion.transpose(1, 2, 0), tuple(jitter), frame.motion_depth,
-                               view_rotation(frame.camera, frame.previous_camera))  # (H, W, 3) or None
+                               view_rotation(frame.camera, frame.previous_camera),
+                               frame.pixels_per_voxel)  # (H, W, 3) or None
         if history is not None:
             history = np.ascontiguousarray(history.transpose(2, 0, 1)[None])
         out = self.engine(lr, vectors, jitters, history)[0].transpose(1, 2, 0)
@@ -144,7 +150,8 @@ class StatefulUpscaler:
         motion = frame.motion if self._continues(frame, colour) else np.zeros_like(frame.motion)
         self.frames.appendleft((colour, motion, np.asarray(frame.jitter, dtype=np.float32)))
         base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth,
-                            view_rotation(frame.camera, frame.previous_camera))
+                            view_rotation(frame.camera, frame.previous_camera), frame.pixels_per_voxel)
         if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale
             base = upscale_bilinear(colour, self.config.scale)
-        return np.clip(filter_image(base, *self.base_filter), 0.0, 1.0)
+        out = filter_image(base, *self.base_filter, scratch=self._scratch)
+        return np.clip(out, 0.0, 1.0, out=out)

@@ -40,6 +40,7 @@ class ModelSection:
     recurrent: bool = False
     taau_base: bool = False
     taau_aux: bool = False
+    taau_fine_sampling: bool = False
     init: str | None = None
 
 

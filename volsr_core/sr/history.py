@@ -7,7 +7,9 @@ A network (:class:`~volsr_core.sr.network_config.NetworkConfig`) takes one of th
   none on the first frame after a cut;
 - ``"taau"``: TAAU's estimate of *this* frame (:func:`taau_upsampler`, run over every frame from
   the cut on), which the network refines; for a network with ``taau_aux`` followed by TAAU's side
-  outputs (the reprojected history and its share of the blend: 7 channels).
+  outputs (the reprojected history and its share of the blend: 7 channels). With ``taau_fine_sampling``
+  the TAAU is told each frame's pixels per voxel (its fine-sampling settings, docs/temporal.md), as the
+  TAAU method is; networks trained before datasets recorded it run theirs without.
 
 :func:`pick_history` is the rule; :class:`HistoryFeed` applies it to a stream of frames (numpy,
 as the runtime and ``volsr eval`` run networks); training applies it to batches
@@ -42,8 +44,8 @@ def pick_history(mode: str, previous_output: Any, taau_estimate: Any) -> Any:
 
 def taau_upsampler(scale: int) -> TemporalUpsampler:
     """The TAAU a TAAU-based network refines, its settings chosen here for training data, evaluation and
-    the runtime alike (a network sees at run time the TAAU it was trained on). Networks feed it no
-    ``pixels_per_voxel`` (the dataset does not record it), so theirs never smooths (docs/temporal.md)."""
+    the runtime alike (a network sees at run time the TAAU it was trained on). :class:`HistoryFeed` tells
+    it each frame's ``pixels_per_voxel`` only for a network with ``taau_fine_sampling``."""
     return TemporalUpsampler(scale)
 
 
@@ -57,9 +59,10 @@ def stand_in_history(lr: np.ndarray, scale: int) -> np.ndarray:
 class HistoryFeed:
     """:func:`pick_history` over a stream of frames, one call per frame, numpy (H, W, 3) images.
 
-    ``feed(colour, motion, jitter, depth, rotation)`` returns this frame's history (or None) and must
-    see every frame from the cut on (TAAU accumulates over all of them; ``depth`` and ``rotation`` as
-    :class:`~volsr_core.temporal.taau.TemporalUpsampler` takes them); ``feed.keep(output)`` hands it
+    ``feed(colour, motion, jitter, depth, rotation, pixels_per_voxel)`` returns this frame's history (or
+    None) and must see every frame from the cut on (TAAU accumulates over all of them; ``depth``,
+    ``rotation`` and ``pixels_per_voxel`` as :class:`~volsr_core.temporal.taau.TemporalUpsampler` takes
+    them, the last passed on only for a network with ``taau_fine_sampling``); ``feed.keep(output)`` hands it
     the network's output for that frame (a recurrent network's next history). :meth:`reset` is a cut.
     """
 
@@ -67,6 +70,7 @@ class HistoryFeed:
         self.mode = history_mode(config)
         self.taau = taau_upsampler(config.scale) if self.mode == "taau" else None
         self.taau_aux = bool(getattr(config, "taau_aux", False))
+        self.fine_sampling = bool(getattr(config, "taau_fine_sampling", False))
         self.previous: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -75,10 +79,12 @@ class HistoryFeed:
             self.taau.reset()
 
     def __call__(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
-                 depth: np.ndarray | None = None, rotation: float | None = None) -> np.ndarray | None:
+                 depth: np.ndarray | None = None, rotation: float | None = None,
+                 pixels_per_voxel: float | None = None) -> np.ndarray | None:
         estimate = None
         if self.taau is not None:
-            estimate = self.taau(colour, motion, jitter, depth, rotation)
+            estimate = self.taau(colour, motion, jitter, depth, rotation,
+                                 pixels_per_voxel if self.fine_sampling else None)
             if self.taau_aux:  # (H, W, 7): the estimate, then what its blend threw away
                 estimate = np.concatenate([estimate, self.taau.last_aux], axis=-1)
         return pick_history(self.mode, self.previous, estimate)

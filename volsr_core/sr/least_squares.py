@@ -2,12 +2,14 @@
 
 XS's output is linear in its weights: per colour channel c, out_c(p) = b_c + sum_k w_ck base_c(p + o_k)
 over the kernel's offsets o_k (edge pixels repeated past the border, as :class:`~volsr_core.sr.network.
-BaseFilter` pads). The weights with the least squared error over the training frames, the error PSNR
-scores, solve the normal equations: one (k² + 1)-unknown system per channel, summed frame by frame, so no
-optimiser, learning rate or steps (stochastic gradient descent on the same data, 1500 AdamW steps,
-got about half the gain). Each frame's base is what the network is given at run time: TAAU's estimate of
-the whole frame (:class:`~volsr_core.sr.history.HistoryFeed` over the video from its first frame) with
-``taau_base``, else the bilinear upscale.
+BaseFilter` pads); a filter pair (``base_orientations`` 2) is that per orientation, each pixel's
+orientation fixed by the base alone. The weights with the least squared error over the training frames,
+the error PSNR scores, solve the normal equations: one (k² + 1)-unknown system per channel and
+orientation, summed frame by frame over the pixels of that orientation, so no optimiser, learning rate
+or steps (stochastic gradient descent on the same data, 1500 AdamW steps, got about half the gain).
+Each frame's base is what the network is given at run time: TAAU's estimate of the whole frame
+(:class:`~volsr_core.sr.history.HistoryFeed` over the video from its first frame) with ``taau_base``,
+else the bilinear upscale.
 """
 from __future__ import annotations
 
@@ -25,7 +27,7 @@ from volsr_core.sr.checkpoint import save_checkpoint
 from volsr_core.sr.config import TrainingConfig
 from volsr_core.sr.loader import SequenceDataset
 from volsr_core.sr.metrics import psnr_ssim
-from volsr_core.sr.network import SuperResolutionNet
+from volsr_core.sr.network import SuperResolutionNet, second_orientation
 
 RIDGE = 1e-6  # Tikhonov term, relative to the mean diagonal of the normal matrix: keeps flat data solvable
 
@@ -54,24 +56,32 @@ def fit_base_filter(model: SuperResolutionNet, dataset: SequenceDataset, progres
     frames: ``crop`` None); returns the pixels fitted per channel."""
     from tqdm import tqdm
 
-    kernel = model.config.base_kernel
-    normal = torch.zeros(3, kernel * kernel + 1, kernel * kernel + 1, dtype=torch.float64)
-    moment = torch.zeros(3, kernel * kernel + 1, dtype=torch.float64)
+    base_filter = model.base_filter
+    kernel, orientations = model.config.base_kernel, base_filter.orientations
+    unknowns = kernel * kernel + 1
+    normal = torch.zeros(orientations, 3, unknowns, unknowns, dtype=torch.float64)
+    moment = torch.zeros(orientations, 3, unknowns, dtype=torch.float64)
     pixels = 0
     with torch.no_grad():
         for i in tqdm(range(len(dataset)), desc="least squares", unit="frame", disable=not progress):
             item = dataset[i]
-            a = design_matrix(model.unfiltered_base(*item_inputs(item))[0], kernel)
+            base = model.unfiltered_base(*item_inputs(item))
+            a = design_matrix(base[0], kernel)
             target = item["hr"].reshape(3, -1, 1).double()
-            normal += a.transpose(1, 2) @ a
-            moment += (a.transpose(1, 2) @ target)[..., 0]
+            second = second_orientation(base)[0, 0].flatten().bool() if orientations == 2 else None
+            for m in range(orientations):
+                rows = slice(None) if second is None else (second if m else ~second)
+                am, tm = a[:, rows], target[:, rows]
+                normal[m] += am.transpose(1, 2) @ am
+                moment[m] += (am.transpose(1, 2) @ tm)[..., 0]
             pixels += a.shape[1]
-        ridge = RIDGE * normal.diagonal(dim1=1, dim2=2).mean(dim=1)
-        solution = torch.linalg.solve(normal + ridge[:, None, None] * torch.eye(normal.shape[1], dtype=normal.dtype),
-                                      moment)
-        conv = model.base_filter.conv
-        conv.weight.copy_(solution[:, :-1].reshape(3, 1, kernel, kernel).to(conv.weight.dtype))
-        conv.bias.copy_(solution[:, -1].to(conv.bias.dtype))
+        # each orientation's filter is drawn towards the one filter of all pixels by the ridge (an orientation
+        # no training pixel had gets that filter)
+        eye = torch.eye(unknowns, dtype=normal.dtype)
+        ridge = RIDGE * normal.sum(0).diagonal(dim1=-2, dim2=-1).mean(dim=-1)[:, None, None] * eye  # (3, u, u)
+        pooled = torch.linalg.solve(normal.sum(0) + ridge, moment.sum(0))
+        solution = torch.linalg.solve(normal + ridge, moment + (ridge @ pooled[..., None])[..., 0])
+        base_filter.set_weights(solution[..., :-1].reshape(orientations, 3, kernel, kernel), solution[..., -1])
     return pixels
 
 

@@ -11,7 +11,7 @@ import torch
 from torch.utils.data import Dataset
 
 from volsr_core.errors import InputError
-from volsr_core.dataset.store import LR_BUFFERS, MANIFEST_FORMAT, read_json, view_rotations
+from volsr_core.dataset.store import LR_BUFFERS, MANIFEST_FORMAT, frame_pixels_per_voxel, read_json, view_rotations
 from volsr_core.sr.history import HistoryFeed
 
 FEATURE_CHANNELS = {name: channels or 1 for name, channels in LR_BUFFERS.items()}
@@ -36,8 +36,9 @@ class SequenceDataset(Dataset):
     - ``taau`` (T, C, P, P), only with ``taau`` (the NetworkConfig of a TAAU-based network): the
       history it takes (C = its ``history_channels``) for the ``hr_frames`` frames t, t-1, ...
       (:class:`~volsr_core.sr.history.HistoryFeed` run over the video from frame 0
-      on the LR colour, motion, jitter, motion depth (a version-1 store: the max-alpha depth) and the
-      view rotations of its cameras; computed for every video when the dataset is made, so that
+      on the LR colour, motion, jitter, motion depth (a version-1 store: the max-alpha depth), the
+      view rotations of its cameras and its frames' pixels per voxel (when the video records its
+      ``voxel_size``); computed for every video when the dataset is made, so that
       forked loader workers inherit it);
     - ``video``, ``frame``: int64 scalars, the video's number and t (for debugging).
 
@@ -170,9 +171,10 @@ class SequenceDataset(Dataset):
             colour, motion, jitter = (h5[f"lr{s}/{k}"][()].astype(np.float32) for k in ("color", "motion", "jitter"))
             depth = h5[f"lr{s}/motion_depth" if f"lr{s}/motion_depth" in h5 else f"lr{s}/depth"][()].astype(np.float32)
             rotation = view_rotations(h5["cameras"][()])
+            fineness = frame_pixels_per_voxel(self.videos[video_index], colour.shape[1])
             feed = HistoryFeed(self.taau)
-            self._taau[video_index] = np.stack([feed(colour[t], motion[t], tuple(jitter[t]), depth[t], rotation[t])
-                                                for t in range(len(colour))]).astype(np.float16)
+            self._taau[video_index] = np.stack([feed(colour[t], motion[t], tuple(jitter[t]), depth[t], rotation[t],
+                                                     fineness[t]) for t in range(len(colour))]).astype(np.float16)
         return self._taau[video_index]
 
     def _lr_size(self, video_index: int) -> tuple[int, int]:

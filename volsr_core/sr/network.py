@@ -53,7 +53,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from volsr_core.sr.network_config import FEATURE_CHANNELS, SCALES, NetworkConfig, variant_config  # noqa: F401
+from volsr_core.sr.network_config import (FEATURE_CHANNELS, ORIENTATION_LUMA, ORIENTATION_SMOOTHING, SCALES,  # noqa: F401
+                                         NetworkConfig, variant_config)
 
 class FeatureBlock(nn.Module):
     """The paper's per-frame residual block; returns the inputs with 8 learned channels appended."""
@@ -111,14 +112,31 @@ class Reweighting(nn.Module):
         return (torch.tanh(self.rest(y)) + 1.0) * 5.0
 
 
+def second_orientation(x: torch.Tensor) -> torch.Tensor:
+    """(B, 1, H, W), 1.0 where a base filter pair uses its second filter, else 0.0, for ``x`` (B, 3, H, W) in
+    [0, 1]: where the local gradient's gx * gy, smoothed, is negative (edges running from the top left to the
+    bottom right, y down), as :data:`~volsr_core.sr.network_config.ORIENTATION_SMOOTHING` defines it."""
+    luma = sum(w * x[:, c:c + 1] for c, w in enumerate(ORIENTATION_LUMA))
+    p = F.pad(luma, (1, 1, 1, 1), mode="replicate")
+    product = 0.5 * (p[..., 1:-1, 2:] - p[..., 1:-1, :-2]) * 0.5 * (p[..., 2:, 1:-1] - p[..., :-2, 1:-1])
+    taps = torch.tensor(ORIENTATION_SMOOTHING, dtype=x.dtype, device=x.device)
+    r = len(ORIENTATION_SMOOTHING) // 2
+    product = F.conv2d(F.pad(product, (r, r, 0, 0), mode="replicate"), taps.view(1, 1, 1, -1))
+    product = F.conv2d(F.pad(product, (0, 0, r, r), mode="replicate"), taps.view(1, 1, -1, 1))
+    return (product < 0).to(x.dtype)
+
+
 class BaseFilter(nn.Module):
     """A learned ``kernel``² filter per colour channel (depthwise, edge pixels repeated past the border),
     starting as the identity: what the residual adds to, or (variant XS) the whole network. At scale s
-    a blur of one LR pixel spans s HR pixels either way, hence XS's kernel of 2 * s + 1."""
+    a blur of one LR pixel spans s HR pixels either way, hence XS's kernel of 2 * s + 1. With
+    ``orientations`` 2 it is a pair, each pixel taking the one for its local orientation
+    (:func:`second_orientation`): a linear filter cannot sharpen edges running both ways alike."""
 
-    def __init__(self, kernel: int):
+    def __init__(self, kernel: int, orientations: int = 1):
         super().__init__()
-        self.conv = nn.Conv2d(3, 3, kernel, groups=3)
+        self.orientations = orientations
+        self.conv = nn.Conv2d(3, 3 * orientations, kernel, groups=3)  # output channel c * orientations + m
         with torch.no_grad():
             self.conv.weight.zero_()
             self.conv.weight[:, 0, kernel // 2, kernel // 2] = 1.0
@@ -126,7 +144,24 @@ class BaseFilter(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         r = self.conv.kernel_size[0] // 2
-        return self.conv(F.pad(x, (r, r, r, r), mode="replicate"))
+        y = self.conv(F.pad(x, (r, r, r, r), mode="replicate"))
+        if self.orientations == 1:
+            return y
+        y = y.unflatten(1, (3, self.orientations))
+        return y[:, :, 0] + second_orientation(x) * (y[:, :, 1] - y[:, :, 0])
+
+    def weights(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(orientations, 3, k, k) weights and (orientations, 3) biases, filter m of channel c at [m, c]."""
+        k, n = self.conv.kernel_size[0], self.orientations
+        return (self.conv.weight.detach().reshape(3, n, k, k).transpose(0, 1),
+                self.conv.bias.detach().reshape(3, n).transpose(0, 1))
+
+    def set_weights(self, weights: torch.Tensor, bias: torch.Tensor) -> None:
+        """The inverse of :meth:`weights`."""
+        k, n = self.conv.kernel_size[0], self.orientations
+        with torch.no_grad():
+            self.conv.weight.copy_(weights.transpose(0, 1).reshape(3 * n, 1, k, k).to(self.conv.weight.dtype))
+            self.conv.bias.copy_(bias.transpose(0, 1).reshape(3 * n).to(self.conv.bias.dtype))
 
 
 class UNet(nn.Module):
@@ -168,7 +203,7 @@ class SuperResolutionNet(nn.Module):
         super().__init__()
         self.config = config
         c, n, d = config.in_channels, config.previous_frames, config.fold
-        self.base_filter = BaseFilter(config.base_kernel) if config.base_kernel else None
+        self.base_filter = BaseFilter(config.base_kernel, config.base_orientations) if config.base_kernel else None
         if not config.widths:  # XS: the learned base filter is the whole network
             return
         self.features = FeatureBlock(c, config.feature_width)

@@ -13,6 +13,12 @@ from volsr_core.config_reader import Source, read_dataclass
 FEATURE_CHANNELS = {"color": 3, "alpha": 1, "depth": 1, "max_rgba": 4, "motion_depth": 1}
 SCALES = (2, 4, 8, 16)
 VARIANTS = ("XS", "S", "M", "L")  # the sized variants, smallest (fastest) first
+# A base filter pair's orientation test (BaseFilter; the CPU kernel in runtime/base_filter.py): the luma of the
+# base (these weights, Rec. 601), its central differences gx, gy, and gx * gy smoothed by this binomial along x,
+# then y, edge pixels repeated at each step; a pixel takes the second filter where the result is negative.
+XS_ORIENTATIONS = {2: 2}  # scale -> XS's filters per colour channel (docs/network.md, "Variant XS"); else 1
+ORIENTATION_LUMA = (0.299, 0.587, 0.114)
+ORIENTATION_SMOOTHING = (0.0625, 0.25, 0.375, 0.25, 0.0625)
 
 
 @dataclass(frozen=True)
@@ -30,6 +36,8 @@ class NetworkConfig:
     taau_base: bool = False     # history = TAAU's estimate of this frame, and the base the output adds to
     taau_aux: bool = False      # taau_base, and the history also holds what TAAU's blend threw away (TemporalUpsampler.last_aux)
     base_kernel: int = 0        # odd: the base passes through a learned base_kernel² filter per colour channel; 0 = none
+    base_orientations: int = 1  # 2: two base filters, each pixel taking the one for its local orientation (BaseFilter)
+    taau_fine_sampling: bool = False  # taau_base, its TAAU told each frame's pixels per voxel (smooths fine frames)
 
     def __post_init__(self) -> None:
         if self.scale not in SCALES:
@@ -45,8 +53,13 @@ class NetworkConfig:
             raise ValueError("a network's history is either its previous output (recurrent) or TAAU's (taau_base)")
         if self.taau_aux and not self.taau_base:
             raise ValueError("taau_aux adds TAAU's side outputs to a TAAU-based network's history (taau_base)")
+        if self.taau_fine_sampling and not self.taau_base:
+            raise ValueError("taau_fine_sampling tells a TAAU-based network's TAAU (taau_base) how fine frames are")
         if self.base_kernel < 0 or (self.base_kernel and self.base_kernel % 2 == 0):
             raise ValueError(f"base_kernel must be 0 or odd, got {self.base_kernel}")
+        if self.base_orientations not in (1, 2) or (self.base_orientations == 2 and not self.base_kernel):
+            raise ValueError(f"base_orientations must be 1, or 2 with a base filter (base_kernel), got "
+                             f"{self.base_orientations}")
         if not self.widths and not self.base_kernel:
             raise ValueError("a network without a U-Net (widths ()) needs a learned base filter (base_kernel)")
         if not self.widths and (self.recurrent or self.previous_frames):
@@ -97,18 +110,21 @@ class NetworkConfig:
 
 def variant_config(variant: str, scale: int = 4, previous_frames: int = 2,
                    features: tuple[str, ...] = ("color", "depth", "max_rgba"),
-                   recurrent: bool = False, taau_base: bool = False, taau_aux: bool = False) -> NetworkConfig:
+                   recurrent: bool = False, taau_base: bool = False, taau_aux: bool = False,
+                   taau_fine_sampling: bool = False) -> NetworkConfig:
     """The sized variants: S folds by the scale (all convolutions at LR), M by scale/2, L by scale/4.
 
     XS is no U-Net at all: a learned (2 * scale + 1)² filter per colour channel on the base (TAAU's
     estimate with ``taau_base``, else the bilinear upscale), wide enough to undo a blur of one LR
-    pixel; it reads no previous frames and no side outputs (``previous_frames``, ``recurrent`` and
-    ``taau_aux`` are ignored).
+    pixel, at 2x a pair of them chosen per pixel by orientation; it reads no previous frames and no side
+    outputs (``previous_frames``, ``recurrent`` and ``taau_aux`` are ignored).
     """
     variant = variant.upper()
-    history = {"recurrent": recurrent, "taau_base": taau_base, "taau_aux": taau_aux}
+    history = {"recurrent": recurrent, "taau_base": taau_base, "taau_aux": taau_aux,
+               "taau_fine_sampling": taau_fine_sampling}
     if variant == "XS":
-        return NetworkConfig(scale, 0, features, fold=scale, widths=(), base_kernel=2 * scale + 1, taau_base=taau_base)
+        return NetworkConfig(scale, 0, features, fold=scale, widths=(), base_kernel=2 * scale + 1, taau_base=taau_base,
+                             base_orientations=XS_ORIENTATIONS.get(scale, 1), taau_fine_sampling=taau_fine_sampling)
     if variant == "S":
         return NetworkConfig(scale, previous_frames, features, fold=scale, widths=(32, 48, 64), **history)
     if variant == "M":

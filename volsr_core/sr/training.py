@@ -108,7 +108,7 @@ class StepBatches(Sampler):
 def build_model(config: TrainingConfig) -> SuperResolutionNet:
     data, model = config.data, config.model
     net = variant_config(model.variant, data.scale, data.previous_frames, data.features, model.recurrent,
-                         model.taau_base, model.taau_aux)
+                         model.taau_base, model.taau_aux, model.taau_fine_sampling)
     overrides = {k: v for k, v in (("fold", model.fold), ("widths", model.widths)) if v is not None}
     if overrides:
         net = NetworkConfig(**{**net.to_dict(), **overrides})
