@@ -53,8 +53,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from volsr_core.sr.network_config import (FEATURE_CHANNELS, ORIENTATION_LUMA, ORIENTATION_SMOOTHING, SCALES,  # noqa: F401
-                                         NetworkConfig, variant_config)
+from volsr_core.sr.network_config import (  # noqa: F401  (FEATURE_CHANNELS, SCALES, variant_config: re-exported)
+    FEATURE_CHANNELS, ORIENTATION_LUMA, ORIENTATION_SMOOTHING, SCALES, NetworkConfig, variant_config)
 
 class FeatureBlock(nn.Module):
     """The paper's per-frame residual block; returns the inputs with 8 learned channels appended."""
