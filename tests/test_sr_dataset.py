@@ -1,6 +1,9 @@
 """SequenceDataset: item shapes, LR/HR crops that line up, flips that keep the vectors consistent."""
 from __future__ import annotations
 
+import json
+import shutil
+
 import numpy as np
 import pytest
 import torch
@@ -184,3 +187,12 @@ def test_bad_arguments(root, tmp_path):
         SequenceDataset(root, previous_frames=5)
     with pytest.raises(ValueError, match="features"):
         SequenceDataset(root, features=("colour",))
+    damaged = tmp_path / "damaged"
+    shutil.copytree(root, damaged)
+    manifest = json.loads((damaged / "manifest.json").read_text())
+    manifest["videos"][0]["voxel_size"] = "0.5 mm"
+    (damaged / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(InputError) as caught:
+        SequenceDataset(damaged, scale=2, crop=32)
+    assert str(caught.value) == (f"{damaged / 'manifest.json'}: video {manifest['videos'][0]['id']} has voxel_size "
+                                 "'0.5 mm'; expected a positive number of mm")

@@ -1,6 +1,7 @@
 """SequenceDataset: training samples from a ``volsr dataset`` folder (docs/dataset.md) as torch tensors."""
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Any, Sequence
@@ -102,6 +103,10 @@ class SequenceDataset(Dataset):
         if video["frames"] <= self.previous_frames:
             raise InputError(where, f"video {video['id']} has {video['frames']} frames; previous_frames="
                              f"{self.previous_frames} needs at least {self.previous_frames + 1}")
+        voxel = video.get("voxel_size")  # None: a video made before videos recorded it (TAAU then never smooths)
+        if voxel is not None and (isinstance(voxel, bool) or not isinstance(voxel, (int, float))
+                                  or not math.isfinite(voxel) or voxel <= 0):
+            raise InputError(where, f"video {video['id']} has voxel_size {voxel!r}; expected a positive number of mm")
         width, height = video["hr_size"]
         if self.crop is not None and self.crop > min(width, height):
             raise InputError(where, f"video {video['id']} is {width}x{height}, smaller than the crop {self.crop}")
