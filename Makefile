@@ -36,12 +36,12 @@ $(PV_STAMP):
 paraview-env: $(PV_STAMP)
 
 ## the main job on the embedded default data: an orbit of the synthetic CT phantom (2 degrees per frame, as a
-## user drags, the phantom filling the view) rendered at 128x128 and upscaled 4x by the shipped S model;
-## side-by-side (native 1 spp | native 1/4 size + bilinear | VolSR) PNGs and MP4, and out/demo/summary.md: ms per
-## frame of each method beside its PSNR against an 8-spp native render
+## user drags, the phantom filling the view) rendered at 256x256 and upscaled 2x by the shipped XS model (what
+## pays off on a CPU: docs/performance.md); side-by-side (native 1 spp | native 1/2 size + bilinear | VolSR) PNGs
+## and MP4, and out/demo/summary.md: ms per frame of each method beside its PSNR against an 8-spp native render
 demo: $(STAMP)
 	$(BIN)/volsr info
-	$(BIN)/volsr upscale --orbit 24 --degrees 2 --size 512 --scale 4 --side-by-side --video out/demo/phantom.mp4 \
+	$(BIN)/volsr upscale --orbit 24 --degrees 2 --size 512 --scale 2 --variant XS --side-by-side --video out/demo/phantom.mp4 \
 		--reference-spp 8 --out out/demo
 	cat out/demo/summary.md
 

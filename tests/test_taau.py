@@ -6,6 +6,9 @@ import numpy as np
 import pytest
 
 from volsr_core.temporal import halton_jitter, jitter_phases
+from volsr_core.temporal.color import (
+    box_minmax, clip_to_box, fetch_catmull_rom, image_to_ycocg, on_screen, to_rgb, to_ycocg,
+)
 from volsr_core.temporal.jitter import sample_offset
 from volsr_core.temporal.taau import TemporalUpsampler, view_rotation
 
@@ -211,6 +214,43 @@ def test_the_side_outputs_hold_the_reprojected_history_and_its_share_of_the_blen
     np.testing.assert_allclose(up.last_aux[..., :3], history, atol=1e-5)
     # the output is the blend of the two by that share
     np.testing.assert_allclose(out, share[..., None] * history + (1.0 - share[..., None]) * 0.4, atol=1e-5)
+
+
+@pytest.mark.parametrize("scale", [2, 4])
+def test_the_history_is_the_catmull_rom_fetch_at_the_reprojected_position_clamped_into_the_lr_box(scale):
+    """Per HR pixel, against the reference stages of temporal.color: the kernel's reprojected history
+    (it slides its Catmull-Rom columns along the HR pixels of one LR sample) equals a 4x4 Catmull-Rom
+    fetch of the previous history at (x, y) + scale * motion of the nearest LR sample, clamped into the
+    YCoCg min/max box of that sample's 3x3 neighbourhood; image edges included."""
+    n = 9
+    rng = np.random.default_rng(21)
+    up = TemporalUpsampler(scale)
+    still = np.zeros((n, n, 2), dtype=np.float32)
+    up(rng.random((n, n, 3), dtype=np.float32), still, (0.0, 0.0), rotation=0.0)
+    previous = up.history[..., :3].copy()
+    lr = rng.random((n, n, 3), dtype=np.float32)
+    motion = rng.uniform(-1.5, 1.5, (n, n, 2)).astype(np.float32)
+    motion[:, : n // 2] = motion[0, 0]  # runs of LR samples with equal motion, too
+    jitter = (0.3, -0.2)
+    up(lr, motion, jitter, rotation=0.0)
+    ycocg = image_to_ycocg(lr)
+    hr = n * scale
+    checked = 0
+    for y in range(hr):
+        ly = min(max(int(np.floor((y + 0.5) / scale - 0.5 - jitter[1] + 0.5)), 0), n - 1)
+        for x in range(hr):
+            lx = min(max(int(np.floor((x + 0.5) / scale - 0.5 - jitter[0] + 0.5)), 0), n - 1)
+            sx, sy = x + scale * motion[ly, lx, 0], y + scale * motion[ly, lx, 1]
+            if up.last_aux[y, x, 3] == 0.0:
+                assert not on_screen(sx, sy, hr, hr)
+                continue
+            fetched = np.empty(3)
+            fetch_catmull_rom(previous, sx, sy, fetched)
+            lo, hi = box_minmax(ycocg, lx, ly)
+            expected = to_rgb(*clip_to_box(to_ycocg(*fetched), lo, hi, False))
+            np.testing.assert_allclose(up.last_aux[y, x, :3], expected, atol=2e-6)
+            checked += 1
+    assert checked > hr * hr // 2
 
 
 # -- fine sampling: the bilinear blend and the shorter history -------------------------------------

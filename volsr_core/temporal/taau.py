@@ -52,27 +52,47 @@ _NB = dict(fastmath=True, boundscheck=False, cache=True)
 
 
 @numba.njit(**_NB)
+def _column_box(lr, rows, i):
+    """YCoCg min and max over LR pixels (rows[0..2], i): (lo0, lo1, lo2, hi0, hi1, hi2)."""
+    lo0 = lo1 = lo2 = np.float32(1e30)
+    hi0 = hi1 = hi2 = np.float32(-1e30)
+    for yy in rows:
+        r, g, b = lr[yy, i, 0], lr[yy, i, 1], lr[yy, i, 2]
+        c0 = np.float32(0.25) * r + np.float32(0.5) * g + np.float32(0.25) * b
+        c1 = np.float32(0.5) * (r - b)
+        c2 = np.float32(0.5) * g - np.float32(0.25) * (r + b)
+        lo0, lo1, lo2 = min(lo0, c0), min(lo1, c1), min(lo2, c2)
+        hi0, hi1, hi2 = max(hi0, c0), max(hi1, c1), max(hi2, c2)
+    return lo0, lo1, lo2, hi0, hi1, hi2
+
+
+@numba.njit(**_NB)
 def _prepass_row(j, lr, motion, scale, dis_motion, box):
-    """LR row j: YCoCg min/max of each 3x3 neighbourhood (box[..., 0:6]) and the parallax flag (box[..., 6])."""
+    """LR row j: YCoCg min/max of each 3x3 neighbourhood (box[..., 0:6]) and the parallax flag (box[..., 6]).
+
+    The box of column i is that of the column boxes of i - 1, i and i + 1 (edges repeated), kept as
+    the row is walked: each pixel's colour is converted three times, not nine.
+    """
     h, w = lr.shape[0], lr.shape[1]
+    j = np.int64(j)
+    rows = (max(j - 1, 0), j, min(j + 1, h - 1))
+    left = _column_box(lr, rows, 0)
+    mid = left
     for i in range(w):
-        lo0 = lo1 = lo2 = 1e30
-        hi0 = hi1 = hi2 = -1e30
+        right = _column_box(lr, rows, min(i + 1, w - 1))
+        box[j, i, 0] = min(min(left[0], mid[0]), right[0])
+        box[j, i, 1] = min(min(left[1], mid[1]), right[1])
+        box[j, i, 2] = min(min(left[2], mid[2]), right[2])
+        box[j, i, 3] = max(max(left[3], mid[3]), right[3])
+        box[j, i, 4] = max(max(left[4], mid[4]), right[4])
+        box[j, i, 5] = max(max(left[5], mid[5]), right[5])
+        left, mid = mid, right
         spread = 0.0
         m0, m1 = motion[j, i, 0], motion[j, i, 1]
-        for dy in range(-1, 2):
-            yy = min(max(j + dy, 0), h - 1)
+        for yy in rows:
             for dx in range(-1, 2):
                 xx = min(max(i + dx, 0), w - 1)
-                r, g, b = lr[yy, xx, 0], lr[yy, xx, 1], lr[yy, xx, 2]
-                c0 = 0.25 * r + 0.5 * g + 0.25 * b
-                c1 = 0.5 * (r - b)
-                c2 = 0.5 * g - 0.25 * (r + b)
-                lo0, lo1, lo2 = min(lo0, c0), min(lo1, c1), min(lo2, c2)
-                hi0, hi1, hi2 = max(hi0, c0), max(hi1, c1), max(hi2, c2)
                 spread = max(spread, abs(motion[yy, xx, 0] - m0) + abs(motion[yy, xx, 1] - m1))
-        box[j, i, 0], box[j, i, 1], box[j, i, 2] = lo0, lo1, lo2
-        box[j, i, 3], box[j, i, 4], box[j, i, 5] = hi0, hi1, hi2
         box[j, i, 6] = 1.0 if scale * spread > dis_motion else 0.0
 
 
@@ -80,6 +100,39 @@ def _prepass_row(j, lr, motion, scale, dis_motion, box):
 def _prepass(lr, motion, scale, dis_motion, box):
     for j in numba.prange(lr.shape[0]):
         _prepass_row(j, lr, motion, scale, dis_motion, box)
+
+
+@numba.njit(**_NB)
+def _catmull_rom_weights(t):
+    """The four Catmull-Rom weights (float32) at fraction ``t`` in [0, 1) past the second tap."""
+    t = np.float32(t)
+    t2 = t * t
+    t3 = t2 * t
+    h = np.float32(0.5)
+    return (h * (-t3 + np.float32(2.0) * t2 - t), h * (np.float32(3.0) * t3 - np.float32(5.0) * t2) + np.float32(1.0),
+            h * (np.float32(-3.0) * t3 + np.float32(4.0) * t2 + t), h * (t3 - t2))
+
+
+@numba.njit(**_NB)
+def _history_column(history, c, rows, ay):
+    """The vertical Catmull-Rom pass of history column ``c`` over ``rows`` (4, clamped) with weights ``ay``: RGB."""
+    r0, r1, r2, r3 = rows
+    a0, a1, a2, a3 = ay
+    return (a0 * history[r0, c, 0] + a1 * history[r1, c, 0] + a2 * history[r2, c, 0] + a3 * history[r3, c, 0],
+            a0 * history[r0, c, 1] + a1 * history[r1, c, 1] + a2 * history[r2, c, 1] + a3 * history[r3, c, 1],
+            a0 * history[r0, c, 2] + a1 * history[r1, c, 2] + a2 * history[r2, c, 2] + a3 * history[r3, c, 2])
+
+
+@numba.njit(**_NB)
+def _rectify(h0, h1, h2, box, ly, lx):
+    """Clamp RGB (h0, h1, h2) into the YCoCg min/max box ``box[ly, lx, 0:6]``."""
+    c0 = 0.25 * h0 + 0.5 * h1 + 0.25 * h2
+    c1 = 0.5 * (h0 - h2)
+    c2 = 0.5 * h1 - 0.25 * (h0 + h2)
+    c0 = min(max(c0, box[ly, lx, 0]), box[ly, lx, 3])
+    c1 = min(max(c1, box[ly, lx, 1]), box[ly, lx, 4])
+    c2 = min(max(c2, box[ly, lx, 2]), box[ly, lx, 5])
+    return c0 + c1 - c2, c0 + c2, c0 - c1 - c2
 
 
 @numba.njit(**_NB)
@@ -96,6 +149,12 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s
     dy1 = dy0 - 1.0
     wy0 = math.exp(-dy0 * dy0 * inv2s2)
     wy1 = math.exp(-dy1 * dy1 * inv2s2)
+    # The HR pixels of one LR sample share its motion, so along a run of them the history is fetched
+    # at consecutive columns with the same rows and vertical weights: the vertical Catmull-Rom pass of
+    # each column (k0..k3, columns ix - 1 .. ix + 2) is kept and slides by one column per pixel.
+    run_lx = -1
+    last_ix = -2
+    k00 = k01 = k02 = k10 = k11 = k12 = k20 = k21 = k22 = k30 = k31 = k32 = np.float32(0.0)
     for x in range(hr_w):
         lx = int(cols[x, 0])
         x0 = int(cols[x, 1])
@@ -144,38 +203,27 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s
                     bottom = history[iy1, ix, 3] + tx * (history[iy1, ix1, 3] - history[iy1, ix, 3])
                     n = min(max(top + ty * (bottom - top), 0.0), cap)
                 if n > 0.0:
-                    t2, t3 = tx * tx, tx * tx * tx
-                    ax0 = 0.5 * (-t3 + 2.0 * t2 - tx)
-                    ax1 = 0.5 * (3.0 * t3 - 5.0 * t2) + 1.0
-                    ax2 = 0.5 * (-3.0 * t3 + 4.0 * t2 + tx)
-                    ax3 = 0.5 * (t3 - t2)
-                    t2, t3 = ty * ty, ty * ty * ty
-                    ay0 = 0.5 * (-t3 + 2.0 * t2 - ty)
-                    ay1 = 0.5 * (3.0 * t3 - 5.0 * t2) + 1.0
-                    ay2 = 0.5 * (-3.0 * t3 + 4.0 * t2 + ty)
-                    ay3 = 0.5 * (t3 - t2)
-                    xm = max(ix - 1, 0)
-                    x2 = min(ix + 2, hr_w - 1)
-                    for k in range(4):
-                        yy = min(max(iy - 1 + k, 0), hr_h - 1)
-                        ay = ay0 if k == 0 else (ay1 if k == 1 else (ay2 if k == 2 else ay3))
-                        r0 = (ax0 * history[yy, xm, 0] + ax1 * history[yy, ix, 0] + ax2 * history[yy, ix1, 0]
-                              + ax3 * history[yy, x2, 0])
-                        r1 = (ax0 * history[yy, xm, 1] + ax1 * history[yy, ix, 1] + ax2 * history[yy, ix1, 1]
-                              + ax3 * history[yy, x2, 1])
-                        r2 = (ax0 * history[yy, xm, 2] + ax1 * history[yy, ix, 2] + ax2 * history[yy, ix1, 2]
-                              + ax3 * history[yy, x2, 2])
-                        h0 += ay * r0
-                        h1 += ay * r1
-                        h2 += ay * r2
+                    rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))
+                    ay = _catmull_rom_weights(ty)
+                    if lx != run_lx or ix != last_ix + 1:
+                        if lx != run_lx or ix != last_ix:  # a new run: all four columns
+                            k00, k01, k02 = _history_column(history, max(ix - 1, 0), rows, ay)
+                            k10, k11, k12 = _history_column(history, ix, rows, ay)
+                            k20, k21, k22 = _history_column(history, ix1, rows, ay)
+                            k30, k31, k32 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
+                    else:  # the next pixel of the run: one new column
+                        k00, k01, k02 = k10, k11, k12
+                        k10, k11, k12 = k20, k21, k22
+                        k20, k21, k22 = k30, k31, k32
+                        k30, k31, k32 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
+                    run_lx = lx
+                    last_ix = ix
+                    ax0, ax1, ax2, ax3 = _catmull_rom_weights(tx)
+                    h0 = ax0 * k00 + ax1 * k10 + ax2 * k20 + ax3 * k30
+                    h1 = ax0 * k01 + ax1 * k11 + ax2 * k21 + ax3 * k31
+                    h2 = ax0 * k02 + ax1 * k12 + ax2 * k22 + ax3 * k32
                     if rectify:  # 5. clamp into the YCoCg box of the 3x3 LR neighbourhood
-                        c0 = 0.25 * h0 + 0.5 * h1 + 0.25 * h2
-                        c1 = 0.5 * (h0 - h2)
-                        c2 = 0.5 * h1 - 0.25 * (h0 + h2)
-                        c0 = min(max(c0, box[ly, lx, 0]), box[ly, lx, 3])
-                        c1 = min(max(c1, box[ly, lx, 1]), box[ly, lx, 4])
-                        c2 = min(max(c2, box[ly, lx, 2]), box[ly, lx, 5])
-                        h0, h1, h2 = c0 + c1 - c2, c0 + c2, c0 - c1 - c2
+                        h0, h1, h2 = _rectify(h0, h1, h2, box, ly, lx)
         # 7. blend
         if n > 0.0:
             inv = 1.0 / (n + a)

@@ -1,0 +1,118 @@
+"""Milliseconds per call of the TAAU kernel, on rendered orbit frames, optionally side by side with an earlier commit's.
+
+    python benchmarks/bench_taau.py [--volume CT_AVM.nii.gz:CT-AAA:0,446] [--sizes 512,1024] [--scales 2,4]
+                                    [--degrees 2] [--frames 12] [--passes 3] [--against COMMIT]
+
+The LR frames of each output size and scale are rendered once, as ``volsr bench`` renders TAAU's (Halton
+jitter, motion vectors to the previous camera, the reprojected point's depth, the view's rotation, the
+frame's pixels per voxel; ray starts jittered), then fed ``--passes`` times through
+``TemporalUpsampler`` (history reset before each pass). With ``--against COMMIT`` the
+``volsr_core/temporal/taau.py`` of that commit (``git show``) runs too, interleaved call by call with
+the current one so that machine noise hits both alike; the table gives the median ms per call of
+each (the calls after the first two frames of a pass, which have a history), their ratio and the
+largest difference between their outputs. ``--volume`` is a ``volsr bench`` volume spec
+(``../shared/data/volumes`` is searched for a bare file name) or ``phantom``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+
+from volsr_core.apps.bench.scenes import load_bench_volume
+from volsr_core.render import RayCaster
+from volsr_core.scene.camera_paths import orbit_around
+from volsr_core.temporal import halton_jitter, jitter_phases
+from volsr_core.temporal import taau as current
+from volsr_core.temporal.taau import view_rotation
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data" / "volumes"
+KERNEL = "volsr_core/temporal/taau.py"
+HISTORY_FRAMES = 2  # calls before these have no (or a one-frame) history: not timed
+
+
+def module_at(commit: str, folder: Path) -> ModuleType:
+    """The TAAU module as it was at ``commit``, imported from a copy in ``folder``."""
+    source = subprocess.run(["git", "-C", str(REPO), "show", f"{commit}:{KERNEL}"], check=True,
+                            capture_output=True, text=True).stdout
+    path = folder / f"taau_{commit.replace('/', '_')}.py"
+    path.write_text(source, encoding="utf-8")
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[path.stem] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def lr_frames(caster: RayCaster, cameras: list, size: int, scale: int) -> list[tuple]:
+    """TAAU's arguments for each camera: colour, motion, jitter, depth, rotation, pixels per voxel."""
+    frames, previous = [], None
+    for t, camera in enumerate(cameras):
+        lr = caster.render(camera, size // scale, size // scale, jitter=halton_jitter(t, jitter_phases(scale)),
+                           previous_camera=previous, seed=t)
+        frames.append((lr.color.copy(), lr.motion.copy(), lr.jitter, lr.motion_depth.copy(),
+                       view_rotation(camera, previous), lr.pixels_per_voxel))
+        previous = camera
+    return frames
+
+
+def time_side_by_side(modules: list[ModuleType], frames: list[tuple], scale: int, passes: int):
+    """Median ms per call of each module's ``TemporalUpsampler`` (interleaved), and the largest output difference."""
+    upsamplers = [m.TemporalUpsampler(scale) for m in modules]
+    times: list[list[float]] = [[] for _ in modules]
+    difference = 0.0
+    for _ in range(passes):
+        for upsampler in upsamplers:
+            upsampler.reset()
+        for t, args in enumerate(frames):
+            outputs = []
+            for k, upsampler in enumerate(upsamplers):
+                started = time.perf_counter()
+                outputs.append(upsampler(*args))
+                if t >= HISTORY_FRAMES:
+                    times[k].append(1000.0 * (time.perf_counter() - started))
+            difference = max([difference] + [float(np.abs(o - outputs[0]).max()) for o in outputs[1:]])
+    return [statistics.median(ms) for ms in times], difference
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--volume", default="CT_AVM.nii.gz:CT-AAA:0,446")
+    parser.add_argument("--sizes", default="512,1024")
+    parser.add_argument("--scales", default="2,4")
+    parser.add_argument("--degrees", type=float, default=2.0)
+    parser.add_argument("--frames", type=int, default=12)
+    parser.add_argument("--passes", type=int, default=3)
+    parser.add_argument("--against", metavar="COMMIT")
+    args = parser.parse_args()
+    spec = args.volume if args.volume.startswith("phantom") or Path(args.volume.split(":")[0]).exists() \
+        else str(DATA / args.volume)
+    scene = load_bench_volume(spec)
+    caster = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign")
+    cameras = orbit_around(caster.visible_bounds(), args.frames, args.degrees)
+    with tempfile.TemporaryDirectory() as folder:
+        modules = [current] + ([module_at(args.against, Path(folder))] if args.against else [])
+        against = f" | {args.against} ms | ratio | max difference |" if args.against else " |"
+        header = "| output | scale | TAAU ms" + against
+        print(f"{scene.label}, {args.frames} frames of {args.degrees:g}°, {args.passes} passes\n\n{header}")
+        print("|---" * (header.count("|") - 1) + "|")
+        for size in (int(s) for s in args.sizes.split(",")):
+            for scale in (int(s) for s in args.scales.split(",")):
+                ms, difference = time_side_by_side(modules, lr_frames(caster, cameras, size, scale), scale, args.passes)
+                row = f"| {size}² | {scale}x | {ms[0]:.2f}"
+                if args.against:
+                    row += f" | {ms[1]:.2f} | {ms[0] / ms[1]:.2f} | {difference:.1e}"
+                print(row + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
