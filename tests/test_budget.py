@@ -2,6 +2,7 @@
 refinement to the native N-spp image while still. On the CPU, the phantom, small untrained models."""
 from __future__ import annotations
 
+import re
 import statistics
 
 import numpy as np
@@ -111,7 +112,7 @@ def test_a_still_camera_refines_to_the_native_supersampled_image(scene):
     assert renderer.state.level != "still" and renderer.state.still_samples == 0, "a move ends the refinement"
 
 
-def test_volsr_upscale_budget_ms_draws_every_frame_within_the_levels(tmp_path):
+def test_volsr_upscale_budget_ms_draws_every_frame_within_the_levels(tmp_path, capsys):
     from PIL import Image
 
     from volsr_core.cli import main
@@ -123,4 +124,13 @@ def test_volsr_upscale_budget_ms_draws_every_frame_within_the_levels(tmp_path):
                  str(out)]) == 0
     pngs = sorted((out / "phantom").glob("frame_*.png"))
     assert len(pngs) == 3 and np.asarray(Image.open(pngs[0])).shape == (64, 64, 3)
+    # the summary says which levels made the frames: the BudgetRenderer's labels, one count per frame
+    printed = capsys.readouterr().out
+    assert "within a 5 ms frame budget" in printed
+    counts = re.search(r"frames per level: (.*?);", printed).group(1)
+    labels = {level.label for level in levels(shipped_models())}
+    used = {label: int(n) for label, n in (item.rsplit(" ", 1) for item in counts.split(", "))}
+    assert set(used) <= labels and sum(used.values()) == 3, used
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    assert summary.startswith("# volsr upscale: a 5 ms frame budget") and f"- phantom: {counts}" in summary
     assert main(["upscale", "--budget-ms", "5", "--model", "x.onnx", "--out", str(out)]) == 2

@@ -274,13 +274,15 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                              else f"{summary.source}: {type(err).__name__}: {' '.join(str(err).split())}")
             print(f"volsr: error: {summary.error}", file=sys.stderr)
     failed = sum(s.error is not None for s in summaries)
-    print(f"upscaled {len(summaries) - failed} of {len(summaries)} input(s) {args.scale}x"
+    how = f"within a {args.budget_ms:g} ms frame budget" if args.budget_ms is not None else f"{args.scale}x"
+    print(f"upscaled {len(summaries) - failed} of {len(summaries)} input(s) {how}"
           + (f" with {Path(str(model)).name}" if model is not None else "") + (f", {failed} failed" if failed else ""))
     for s in summaries:
         print("  " + s.line())
     out.mkdir(parents=True, exist_ok=True)
     with atomic_write(out / "summary.md", "w", encoding="utf-8") as fh:
-        fh.write(batch.summary_markdown(summaries, args.scale, Path(str(model)).name if model is not None else "-"))
+        fh.write(batch.summary_markdown(summaries, args.scale, Path(str(model)).name if model is not None else "-",
+                                        budget_ms=args.budget_ms))
     print(f"  summary: {out / 'summary.md'}")
     return 1 if failed else 0
 

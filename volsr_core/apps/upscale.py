@@ -194,6 +194,7 @@ class InputSummary:
     method_ms: dict[str, list[float]] = field(default_factory=dict)  # method -> total ms per frame
     psnr: dict[str, list[float]] = field(default_factory=dict)   # method -> dB per frame
     reference_spp: int = 0
+    levels: dict[str, int] = field(default_factory=dict)  # frame-budget mode: frames made by each level
     outputs: list[Path] = field(default_factory=list)
     error: str | None = None
 
@@ -208,6 +209,10 @@ class InputSummary:
         text = f"{method} {statistics.median(self.method_ms[method]):.1f} ms"
         return text + (f", {np.mean(self.psnr[method]):.2f} dB" if method in self.psnr else "")
 
+    def levels_text(self) -> str:
+        """Frame-budget mode's levels in the order first used, with their frames: "VolSR XS 2x 12, TAAU 2x 4"."""
+        return ", ".join(f"{level} {count}" for level, count in self.levels.items())
+
     def line(self) -> str:
         if self.error is not None:
             done = f" after {self.frames} frame(s)" if self.frames else ""
@@ -220,15 +225,19 @@ class InputSummary:
             text += (f"; per method (median ms, mean PSNR vs {self.reference_spp}-spp native)" if self.psnr
                      else "; per method (median ms)")
             text += ": " + " | ".join(self.method_line(m) for m in self.method_ms)
+        if self.levels:
+            text += f"; frames per level: {self.levels_text()}"
         if self.outputs:
             text += f"; wrote {self.outputs[0].parent}/" + "".join(f", {p}" for p in self.outputs if p.suffix == ".mp4")
         return text
 
 
-def summary_markdown(summaries: Sequence[InputSummary], scale: int, model: str) -> str:
+def summary_markdown(summaries: Sequence[InputSummary], scale: int, model: str, budget_ms: float | None = None) -> str:
     """OUT/summary.md: per input and method, median ms per frame, its ratio to the native 1-spp render's
-    and mean PSNR, so the trade between time and quality reads at a glance."""
-    lines = [f"# volsr upscale: {scale}x with {model}", "",
+    and mean PSNR, so the trade between time and quality reads at a glance; in frame-budget mode
+    (``budget_ms``) also the frames each level made."""
+    title = f"a {budget_ms:g} ms frame budget" if budget_ms is not None else f"{scale}x with {model}"
+    lines = [f"# volsr upscale: {title}", "",
              "| input | frames | size | method | ms per frame (median) | time / native 1 spp | PSNR dB (mean) |",
              "|---|---:|---|---|---:|---:|---:|"]
     for s in summaries:
@@ -244,6 +253,10 @@ def summary_markdown(summaries: Sequence[InputSummary], scale: int, model: str) 
     reference = next((s.reference_spp for s in summaries if s.reference_spp), 0)
     if reference:
         lines += ["", f"PSNR against the native render of every frame with {reference} samples per pixel."]
+    if any(s.levels for s in summaries):
+        lines += ["", "Frames per level (VolSR is what the budget chose for each frame; \"still\": refining a "
+                  "still camera):"]
+        lines += [f"- {s.name}: {s.levels_text()}" for s in summaries if s.levels]
     return "\n".join(lines) + "\n"
 
 
@@ -309,6 +322,9 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
                 summary.method_ms.setdefault(name, []).append(frame.ms_total)
             for stage, ms in pipeline.last_timings.items():
                 summary.timings[stage].append(ms)
+            state = getattr(pipeline, "state", None)  # a BudgetRenderer: the level that made the frame
+            if state is not None:
+                summary.levels[state.level] = summary.levels.get(state.level, 0) + 1
             if reference_spp:
                 reference = render_supersampled(caster, camera, width, height, spp=reference_spp)
                 for name in ("VolSR", "bilinear", "native 1 spp"):
