@@ -97,16 +97,18 @@ class VolSRParameterNode:
     inputVolume - the scalar volume VolSR draws in the first 3D view (volume rendering is switched on for it).
     preset - the VolSR preset written into the volume's volume property node; KEEP_PRESET keeps Slicer's own.
     scale - upscaling factor: the volume is ray cast at 1/scale of the view's width and height.
-    variant - network size: XS (fastest), S, M, L (best).
+    variant - network size: XS (fastest), S, M, L (best). The defaults, XS at 2x, are what pays off on a
+        CPU: a better picture than rendering fewer pixels in the same time (docs/performance.md).
     device - where the ray caster and the network run.
-    modelPath - an .onnx/.pt model file; "" for the shipped model of the variant at the scale.
+    modelPath - an .onnx/.pt model file, which upscales by its own scale; "" for the shipped model of the
+        variant at the scale.
     enabled - VolSR draws the 3D view (True) or Slicer does (False).
     """
 
     inputVolume: vtkMRMLScalarVolumeNode
     preset: Annotated[str, Choice((KEEP_PRESET, *PRESETS))] = KEEP_PRESET
-    scale: Annotated[int, Choice(SCALES)] = 4
-    variant: Annotated[str, Choice(VARIANTS)] = "S"
+    scale: Annotated[int, Choice(SCALES)] = 2  # volsr_core.runtime.models.DEFAULT_SCALE
+    variant: Annotated[str, Choice(VARIANTS)] = "XS"  # volsr_core.runtime.models.default_variant(2)
     device: Annotated[str, Choice(DEVICES)] = "cpu"
     modelPath: str = ""
     enabled: bool = False
@@ -264,7 +266,7 @@ class VolSRLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
     """Switches VolSR on and off for a volume node in a 3D view; no GUI needed.
 
     ``apply(parameters)`` makes the 3D view show what a VolSRParameterNode says (the scene's own:
-    ``getParameterNode()``). ``enable(volumeNode, scale=4, variant="S")`` does it from plain arguments:
+    ``getParameterNode()``). ``enable(volumeNode, scale=2, variant="XS")`` does it from plain arguments:
     it shows the node with volume rendering (if it was not), attaches VolSR to the 3D view's first
     renderer and returns the ``volsr_core.hosts.slicer.SlicerSession``; ``disable()`` gives the view
     back to Slicer.
@@ -291,9 +293,11 @@ class VolSRLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
     # the parameter node ------------------------------------------------------------------------------
     @staticmethod
     def settingsFrom(parameters: VolSRParameterNode) -> dict:
-        """``enable()``'s arguments from ``parameters`` (an empty model path: None, the shipped model)."""
-        return {"volumeNode": parameters.inputVolume, "scale": parameters.scale, "variant": parameters.variant,
-                "model": parameters.modelPath.strip() or None, "device": parameters.device}
+        """``enable()``'s arguments from ``parameters`` (an empty model path: None, the shipped model of the
+        variant at the scale; a model file: scale None, the model's own)."""
+        model = parameters.modelPath.strip() or None
+        return {"volumeNode": parameters.inputVolume, "scale": parameters.scale if model is None else None,
+                "variant": parameters.variant, "model": model, "device": parameters.device}
 
     def apply(self, parameters: VolSRParameterNode):
         """Make the 3D view show what ``parameters`` say; returns the SlicerSession (None when off).
@@ -400,9 +404,10 @@ class VolSRLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.render()
 
     # on / off ----------------------------------------------------------------------------------------
-    def enable(self, volumeNode, scale: int = 4, variant: str = "S", model=None, preset: str | None = None,
+    def enable(self, volumeNode, scale: int | None = 2, variant: str = "XS", model=None, preset: str | None = None,
                device: str = "cpu", viewIndex: int | None = None):
-        """Draw ``volumeNode`` with VolSR in the 3D view; returns the SlicerSession."""
+        """Draw ``volumeNode`` with VolSR in the 3D view; returns the SlicerSession. ``scale`` None: the
+        model file's own."""
         self.ensureDependencies()
         from volsr_core.hosts.slicer import SlicerSession
 
@@ -524,12 +529,12 @@ class VolSRTest(ScriptedLoadableModuleTest):
         return VolSRParameterNode(slicer.mrmlScene.AddNewNodeByClass("vtkMRMLScriptedModuleNode", "VolSRTest"))
 
     def testModel(self):
-        """The shipped S 4x model (None), else an untrained one exported here (needs PyTorch)."""
+        """None for the shipped default model (XS 2x), else an untrained S 4x one exported here (needs PyTorch)."""
         from volsr_core.errors import InputError
         from volsr_core.runtime.models import model_file
 
         try:
-            model_file("S", 4)
+            model_file("XS", 2)
             return None
         except InputError:
             pass
@@ -539,7 +544,7 @@ class VolSRTest(ScriptedLoadableModuleTest):
             from volsr_core.runtime.export import export_onnx
             from volsr_core.sr.network import SuperResolutionNet, variant_config
         except ImportError:
-            self.skipTest("no shipped S 4x model and no PyTorch to export an untrained one")
+            self.skipTest("no shipped XS 2x model and no PyTorch to export an untrained one")
         torch.manual_seed(0)
         net = SuperResolutionNet(variant_config("S", 4, 0, taau_base=True)).eval()
         return str(export_onnx(net, Path(slicer.app.temporaryPath) / "VolSRTest-S4.onnx"))
@@ -569,7 +574,7 @@ class VolSRTest(ScriptedLoadableModuleTest):
         parameters = self.privateParameterNode()
         self.assertIsNone(parameters.inputVolume)
         self.assertEqual((parameters.preset, parameters.scale, parameters.variant, parameters.device,
-                          parameters.modelPath, parameters.enabled), (KEEP_PRESET, 4, "S", "cpu", "", False))
+                          parameters.modelPath, parameters.enabled), (KEEP_PRESET, 2, "XS", "cpu", "", False))
         parameters.scale = 8
         self.assertEqual(parameters.parameterNode.GetParameter("scale"), "8")  # in the node: saved with the scene
         with self.assertRaises(ValueError):
@@ -594,7 +599,7 @@ class VolSRTest(ScriptedLoadableModuleTest):
         parameters.inputVolume = node
         parameters.preset = "CT-Phantom"
         parameters.modelPath = model or ""
-        parameters.enabled = True  # scale 4, variant S: the defaults
+        parameters.enabled = True  # the shipped XS 2x: the defaults (an untrained model: its own scale)
         session = logic.apply(parameters)
         self.assertIs(logic.apply(parameters), session, "unchanged settings: no restart")
         view = logic.threeDView()

@@ -1,11 +1,12 @@
 """The screenshots in docs/hosts-vtk.md and docs/pyvista.md: CT_AVM drawn by VolSR inside VTK and PyVista.
 
-Real offscreen (EGL) runs of the host adapters, CT-AAA placed on 0..446, 4x from 128x96 to 512x384:
+Real offscreen (EGL) runs of the host adapters, CT-AAA placed on 0..446, 512x384, with the hosts' default
+model (VolSR XS 2x, from 256x192) unless ``--model`` names one:
 
     VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow python benchmarks/host_screenshots.py \
         [--model PATH | --model untrained] [--data ../shared/data/volumes] [--size 512x384] [--out docs/images]
 
-``--model`` defaults to the shipped model (variant S, 4x); ``untrained`` exports the small
+``--model`` defaults to none, the hosts' own default; ``untrained`` exports the small
 untrained network the tests use (the pictures then show the plumbing, not the quality).
 Writes hosts_vtk.png and pyvista.png and prints the timings.
 """
@@ -93,7 +94,8 @@ def pyvista_screenshot(volume, model, size, frames: int) -> np.ndarray:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--model", default=None, help="an .onnx/.pt file, 'untrained', or none for the shipped S 4x")
+    parser.add_argument("--model", default=None,
+                        help="an .onnx/.pt file, 'untrained', or none for the hosts' default (XS 2x)")
     parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data" / "volumes")
     parser.add_argument("--size", default="512x384")
     parser.add_argument("--frames", type=int, default=6)
@@ -101,14 +103,13 @@ def main() -> None:
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.lower().split("x"))
 
-    from volsr_core.runtime.models import model_file
     from volsr_core.scene import Volume, get_preset
 
     with tempfile.TemporaryDirectory() as scratch:
         if args.model == "untrained":
             model = untrained_model(Path(scratch))
         else:
-            model = Path(args.model) if args.model else model_file("S", 4)
+            model = Path(args.model) if args.model else None
         volume = Volume.load(args.data / "CT_AVM.nii.gz")
         tf = get_preset("CT-AAA").placed_on(0.0, 446.0)
         save_png(vtk_screenshot(volume, tf, model, size, args.frames), args.out / "hosts_vtk.png")

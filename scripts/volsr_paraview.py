@@ -1,7 +1,7 @@
 """VolSR in ParaView's pvpython: show a volume in a ParaView render view, orbit it, upscale every frame.
 
     xvfb-run -a pvpython scripts/volsr_paraview.py [--venv .venv-paraview] INPUT --preset CT-Bone --orbit 8 \\
-        --size 256 --scale 4 --out DIR [--model FILE] [--save-view]
+        --size 256 --scale 2 --out DIR [--model FILE] [--save-view]
 
 INPUT is what ``volsr render`` reads (a DICOM folder or a file in it, .nrrd/.nhdr, .nii[.gz], .mha/.mhd, .vti;
 none: the synthetic phantom), read with VolSR's readers (LPS millimetres) and handed to ParaView as a
@@ -70,9 +70,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--elevation", type=float, default=0.0, help="elevation of the orbit in degrees (default 0)")
     p.add_argument("--size", type=parse_size, default=(512, 512), metavar="W[xH]",
                    help="view and output size in pixels (default 512)")
-    p.add_argument("--scale", type=int, default=4, help="upscaling factor; VolSR renders at 1/scale (default 4)")
+    p.add_argument("--scale", type=int, help="upscaling factor; VolSR renders at 1/scale (default 2; with --model, "
+                   "the model's)")
     p.add_argument("--model", metavar="FILE", help=".onnx or .pt model (default: the shipped model of --variant)")
-    p.add_argument("--variant", default="S", choices=["XS", "S", "M", "L"], help="shipped model variant (default S)")
+    p.add_argument("--variant", choices=["XS", "S", "M", "L"],
+                   help="shipped model variant (default: the smallest shipped at --scale, XS at 2x)")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"], help="ray caster and network device")
     p.add_argument("--threads", type=int, help="onnxruntime intra-op threads (default: its own choice)")
     p.add_argument("--out", default="out/paraview", metavar="DIR", help="output folder (default out/paraview)")
@@ -103,7 +105,7 @@ def main(argv: list[str]) -> int:
     from volsr_core.errors import VolSRError
 
     args = build_parser().parse_args(argv)
-    if args.orbit < 1 or args.scale < 1:
+    if args.orbit < 1 or (args.scale is not None and args.scale < 1):
         print("volsr_paraview: error: --orbit and --scale must be at least 1", file=sys.stderr)
         return 2
     try:

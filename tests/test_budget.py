@@ -12,8 +12,9 @@ pytest.importorskip("torch")
 pytest.importorskip("onnxruntime")
 
 from volsr_core.io import make_phantom  # noqa: E402
-from volsr_core.runtime.budget import BudgetRenderer, Level, levels  # noqa: E402
+from volsr_core.runtime.budget import BudgetRenderer, Level, levels, unpaid  # noqa: E402
 from volsr_core.runtime.export import export_onnx  # noqa: E402
+from volsr_core.runtime.models import PAYING_NETWORK_SHARE  # noqa: E402
 from volsr_core.scene import Volume, get_preset  # noqa: E402
 from volsr_core.scene.camera_paths import orbit_around  # noqa: E402
 from volsr_core.sr.metrics import psnr_ssim  # noqa: E402
@@ -37,8 +38,45 @@ def scene(tmp_path_factory):
 
 def test_levels_run_finest_first():
     shipped = [{"scale": 4, "variant": "S"}, {"scale": 2, "variant": "S"}, {"scale": 4, "variant": "M"}]
-    assert [lv.label for lv in levels(shipped)] == ["native 1 spp", "VolSR S 2x", "TAAU 2x", "VolSR M 4x",
-                                                     "VolSR S 4x", "TAAU 4x"]
+    assert [lv.label for lv in levels(shipped)] == [
+        "native 1 spp", "VolSR S 2x", "TAAU 2x", "native 1/2 size + bilinear", "native 1/3 size + bilinear",
+        "VolSR M 4x", "VolSR S 4x", "TAAU 4x", "native 1/4 size + bilinear", "native 1/6 size + bilinear",
+        "native 1/8 size + bilinear"]
+
+
+def test_unpaid_names_the_models_whose_network_costs_more_than_half_the_lr_render():
+    """A model's network is its ms beyond TAAU's at its scale; the LR render, the same-size bilinear level's."""
+    estimates = {Level(1): 200.0, Level(2, "S"): 150.0, Level(2, "XS"): 55.0, Level(2): 50.0,
+                 Level(2, bilinear=True): 45.0, Level(4, "S"): 60.0, Level(4): 20.0}
+    left_out = unpaid(estimates)
+    assert list(left_out) == [Level(2, "S")], "S 2x: 100 ms > 22.5; XS 2x: 5 ms; S 4x: no 1/4-size level to judge by"
+    assert left_out[Level(2, "S")] == f"network 100 ms, more than {PAYING_NETWORK_SHARE:g} of the 45 ms LR render"
+
+
+def test_a_model_that_does_not_pay_is_left_out_and_never_drawn(scene):
+    volume, tf, files = scene
+    renderer = BudgetRenderer(volume, tf, 1e6, size=SIZE, choices=[Level(2, "S"), Level(2), Level(2, bilinear=True)],
+                              model_files=files, threads=2)
+    cameras = orbit_around(renderer.caster.visible_bounds(), 3, 2.0)
+    for camera in cameras:
+        renderer.render(camera)
+    cost = renderer.estimates
+    network = cost[Level(2, "S")] - cost[Level(2)]
+    dropped = network > PAYING_NETWORK_SHARE * cost[Level(2, bilinear=True)]
+    print(f"S 2x network {network:.1f} ms, LR render {cost[Level(2, bilinear=True)]:.1f} ms: dropped {dropped}")
+    assert (Level(2, "S") not in renderer.choices) is dropped and ("VolSR S 2x" in renderer.left_out) is dropped
+    assert renderer.state.level == ("TAAU 2x" if dropped else "VolSR S 2x"), "the finest level kept (an ample budget)"
+
+
+def test_a_reduced_size_level_renders_a_third_of_the_size_and_stretches_it(scene):
+    volume, tf, _ = scene
+    renderer = BudgetRenderer(volume, tf, 1e-3, size=SIZE, choices=[Level(1), Level(3, bilinear=True)])
+    camera = orbit_around(renderer.caster.visible_bounds(), 1, 2.0)[0]
+    image = renderer.render(camera)
+    assert renderer.state.level == "native 1/3 size + bilinear" and renderer.low_resolution_size == (64, 64)
+    assert image.shape == (*SIZE[::-1], 3) and renderer.last_low_resolution.color.shape == (64, 64, 3)
+    native = renderer.caster.render(camera, *SIZE).color
+    assert psnr_ssim(image, native, channel_axis=-1)[0] > 20.0, "the same view, stretched over the full size"
 
 
 def test_a_budget_below_the_2x_model_takes_taau_2x_before_any_4x_level(scene):
@@ -131,6 +169,9 @@ def test_volsr_upscale_budget_ms_draws_every_frame_within_the_levels(tmp_path, c
     labels = {level.label for level in levels(shipped_models())}
     used = {label: int(n) for label, n in (item.rsplit(" ", 1) for item in counts.split(", "))}
     assert set(used) <= labels and sum(used.values()) == 3, used
+    left_out = re.search(r"; left out: (.*?);", printed)
+    for label in re.findall(r"(VolSR \w+ \d+x) \(network", left_out.group(1)) if left_out else []:
+        assert label in labels and label not in used, "a model left out is a shipped level that drew no frame"
     summary = (out / "summary.md").read_text(encoding="utf-8")
     assert summary.startswith("# volsr upscale: a 5 ms frame budget") and f"- phantom: {counts}" in summary
     assert main(["upscale", "--budget-ms", "5", "--model", "x.onnx", "--out", str(out)]) == 2

@@ -146,6 +146,16 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path, model_s4, capsys):
     assert "exists and is not a folder" in capsys.readouterr().err
 
 
+def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
+    """The defaults are the model that pays off on a CPU (docs/performance.md); --scale alone takes the smallest
+    variant shipped at that scale."""
+    assert main(["upscale", "--orbit", "2", "--size", "32", "--out", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert "upscaled 1 of 1 input(s) 2x with volsr-XS-2x.onnx" in out and "from 16x16" in out
+    assert main(["upscale", "--orbit", "1", "--size", "32", "--scale", "8", "--out", str(tmp_path / "b")]) == 0
+    assert "8x with volsr-S-8x.onnx" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("stop", [KeyboardInterrupt, RuntimeError])
 def test_an_interrupted_run_leaves_complete_files_only(tmp_path, model_s4, small_volume, stop):
     from volsr_core.runtime.pipeline import Pipeline
@@ -174,7 +184,7 @@ def test_auto_variant_rule(capsys):
     assert batch.choose_variant({"M": 60}, budget_ms=50) == "S"
     with pytest.raises(SystemExit):
         build_parser().parse_args(["upscale", "--help"])
-    assert "the network must be cheaper than rendering natively" in " ".join(capsys.readouterr().out.split())
+    assert "half the time of one LR render" in " ".join(capsys.readouterr().out.split())
 
 
 @pytest.fixture(scope="module")
@@ -196,12 +206,12 @@ def registry_s_m(tmp_path_factory, model_s4):
 
 def run_auto(tmp_path, small_volume, capsys) -> tuple[str, str]:
     """``volsr upscale --variant auto`` on the small volume: (the variant chosen, all it printed)."""
-    code = main(["upscale", str(small_volume), "--variant", "auto", "--orbit", "1", "--size", "32",
+    code = main(["upscale", str(small_volume), "--variant", "auto", "--scale", "4", "--orbit", "1", "--size", "32",
                  "--out", str(tmp_path / "out")])
     assert code == 0
     out = capsys.readouterr().out
     line = next(line for line in out.splitlines() if line.startswith("variant auto:"))
-    assert "budget (native 1-spp render)" in line
+    assert "of the 8x8 LR render" in line
     assert (tmp_path / "out" / "small" / "frame_0000.png").is_file()
     return line.rsplit("-> ", 1)[1], out
 
@@ -210,12 +220,12 @@ def test_variant_auto_picks_from_the_shipped_registry(tmp_path, monkeypatch, reg
     """The times measured on this machine, recorded as they are taken, decide the variant the rule must pick."""
     monkeypatch.setattr(models, "models_dir", lambda: registry_s_m)
     measured: dict[str, float] = {}
-    network_ms, native_render_ms = batch.network_ms, batch.native_render_ms
+    network_ms, render_ms = batch.network_ms, batch.render_ms
     monkeypatch.setattr(batch, "network_ms", lambda engine, *a: measured.setdefault(engine.path.name,
                                                                                    network_ms(engine, *a)))
-    monkeypatch.setattr(batch, "native_render_ms", lambda *a: measured.setdefault("budget", native_render_ms(*a)))
+    monkeypatch.setattr(batch, "render_ms", lambda *a: measured.setdefault("lr render", render_ms(*a)))
     chosen, out = run_auto(tmp_path, small_volume, capsys)
-    m_fits = measured["m4.onnx"] <= measured["budget"]
+    m_fits = measured["m4.onnx"] <= models.PAYING_NETWORK_SHARE * measured["lr render"]
     assert chosen == ("M" if m_fits else "S")
     assert ("s4.onnx" in measured) is not m_fits, "S is timed only when M does not fit"
     assert f"with {chosen.lower()}4.onnx" in out
@@ -224,11 +234,12 @@ def test_variant_auto_picks_from_the_shipped_registry(tmp_path, monkeypatch, reg
 @pytest.mark.parametrize("budget, expected", [(50.0, "M"), (40.0, "M"), (39.0, "S")])
 def test_variant_auto_takes_the_largest_that_fits_the_budget(tmp_path, monkeypatch, registry_s_m, small_volume,
                                                               capsys, budget, expected):
-    """M takes 40 ms and S 10 ms per frame: M fits a budget of 40 ms or more, S takes the rest."""
+    """M takes 40 ms and S 10 ms per frame: M fits a budget (half the LR render) of 40 ms or more, S the rest."""
     monkeypatch.setattr(models, "models_dir", lambda: registry_s_m)
     monkeypatch.setattr(batch, "network_ms", lambda engine, *a: {"m4.onnx": 40.0, "s4.onnx": 10.0}[engine.path.name])
-    monkeypatch.setattr(batch, "native_render_ms", lambda *a: budget)
+    monkeypatch.setattr(batch, "render_ms", lambda caster, camera, size: 2 * budget if size == (8, 8) else 0.0)
     chosen, out = run_auto(tmp_path, small_volume, capsys)
     assert chosen == expected and f"with {expected.lower()}4.onnx" in out
     times = "M 40 ms" if expected == "M" else "M 40 ms, S 10 ms"
-    assert f"network per 32x32 frame {times}; budget (native 1-spp render) {budget:.0f} ms -> {expected}" in out
+    assert (f"network per 32x32 frame {times}; budget {budget:.0f} ms (0.5 of the 8x8 LR render, {2 * budget:.0f} ms)"
+            f" -> {expected}") in out

@@ -195,7 +195,7 @@ def test_a_full_disk_during_upscale_stops_the_batch(tmp_path):
     (["render", "--spp", "0"], "argument --spp: must be an integer >= 1"),
     (["upscale", "--fps", "inf"], "argument --fps: must be a finite number of frames per second in (0, 240]"),
     (["upscale", "--scale", "0"], "argument --scale: must be an integer in [2, 16]"),
-    (["upscale", "--variant", "L"], "no shipped model for variant L at 4x (shipped:"),
+    (["upscale", "--variant", "L"], "no shipped model for variant L at 2x (shipped:"),
     (["bench", "--frames", "0"], "argument --frames: must be an integer >= 1"),
 ])
 def test_malformed_options_exit_2_naming_the_option(tmp_path, argv, phrase):

@@ -143,6 +143,7 @@ def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(tmp_p
     assert corner == pytest.approx([0.2, 0.3, 0.4], abs=1e-3), "the new background shows where no ray hits"
     with pytest.raises(ValueError, match="upscales 4x, not 2x"):
         Pipeline(volume, get_preset("CT-Phantom"), model, scale=2)
+    assert Pipeline(volume, get_preset("CT-Phantom"), model, size=(66, 50)).scale == 4, "no scale: the model's own"
 
 
 def test_a_taau_based_upscaler_runs_taau_and_starts_as_it():

@@ -31,6 +31,18 @@ def test_the_4x_model_of_variant_s_is_shipped():
     assert any(m["variant"] == "S" and m["scale"] == 4 for m in SHIPPED), "resources/models/models.json lists it"
 
 
+def test_the_default_is_xs_2x_and_a_scale_alone_takes_the_smallest_model_shipped_there():
+    """What hosts and ``volsr upscale`` run unless told: VolSR XS 2x, the model above the native + bilinear
+    curve at equal time on a CPU (docs/performance.md)."""
+    volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
+    tf = get_preset("CT-Phantom")
+    by_default = Pipeline(volume, tf, size=(32, 32))
+    assert (by_default.scale, by_default.engine.path.name) == (2, "volsr-XS-2x.onnx")
+    assert [models.default_variant(s) for s in (2, 4, 8)] == ["XS", "XS", "S"]
+    assert Pipeline(volume, tf, scale=8, size=(32, 32)).engine.path.name == "volsr-S-8x.onnx"
+    assert Pipeline(volume, tf, scale=4, variant="S", size=(32, 32)).engine.path.name == "volsr-S-4x.onnx"
+
+
 @pytest.mark.parametrize("entry", SHIPPED, ids=[m["name"] for m in SHIPPED])
 def test_a_shipped_model_is_small_checked_and_its_two_files_agree(entry):
     onnx_path = models.model_file(entry["variant"], entry["scale"], "onnx")

@@ -292,20 +292,23 @@ def test_the_parameter_node_declares_every_setting_the_ui_binds(volsr):
     assert re.search(r'self\.ui\.modelPathLineEdit\.connect\("currentPathChanged\(QString\)", self\.onModelPathChanged\)',
                      VOLSR_PY.read_text(encoding="utf-8"))
     defaults = {name: getattr(node_class, name, None) for name in hints}
-    assert defaults == {"inputVolume": None, "preset": volsr.KEEP_PRESET, "scale": 4, "variant": "S", "device": "cpu",
+    assert defaults == {"inputVolume": None, "preset": volsr.KEEP_PRESET, "scale": 2, "variant": "XS", "device": "cpu",
                         "modelPath": "", "enabled": False}
     preset_choices = typing.get_args(hints["preset"])[1].choices
     assert tuple(preset_choices) == (volsr.KEEP_PRESET, *volsr.PRESETS)
 
 
 def test_the_module_settings_are_volsr_cores(volsr):
-    """PRESETS, SCALES, VARIANTS and DEVICES are spelled out in VolSR.py (needed before volsr_core can be
-    imported): they must stay volsr_core's."""
+    """PRESETS, SCALES, VARIANTS, DEVICES and the default scale and variant are spelled out in VolSR.py
+    (needed before volsr_core can be imported): they must stay volsr_core's."""
     from volsr_core.hosts.slicer import SCALES, VARIANTS, preset_names
     from volsr_core.render.raycaster import DEVICES
+    from volsr_core.runtime.models import DEFAULT_SCALE, default_variant
 
     assert list(volsr.PRESETS) == preset_names()
     assert volsr.SCALES == SCALES and volsr.VARIANTS == VARIANTS and volsr.DEVICES == DEVICES
+    defaults = volsr.VolSRParameterNode()
+    assert (defaults.scale, defaults.variant) == (DEFAULT_SCALE, default_variant(DEFAULT_SCALE)) == (2, "XS")
 
 
 def test_the_logic_follows_the_parameter_node(volsr):
@@ -345,18 +348,21 @@ def test_the_logic_follows_the_parameter_node(volsr):
     assert applied() == [("preset", volume, "CT-AAA")]
     assert applied() == [], "written once"
     parameters.enabled = True
-    shipped = {"volumeNode": volume, "scale": 4, "variant": "S", "model": None, "device": "cpu"}
+    shipped = {"volumeNode": volume, "scale": 2, "variant": "XS", "model": None, "device": "cpu"}
     assert applied() == [("enable", shipped)] and logic.enabled
     assert applied() == [], "unchanged: no restart"
     parameters.scale, parameters.modelPath = 8, " /models/s8.onnx "
-    assert applied() == [("disable",), ("enable", {**shipped, "scale": 8, "model": "/models/s8.onnx"})]
+    own = {**shipped, "scale": None, "model": "/models/s8.onnx"}  # a model file upscales by its own scale
+    assert applied() == [("disable",), ("enable", own)]
+    parameters.scale = 4
+    assert applied() == [], "the scale is the model file's: no restart"
     parameters.preset = volsr.KEEP_PRESET
     assert applied() == []
     parameters.preset = "CT-AAA"
     assert applied() == [("preset", volume, "CT-AAA")], "chosen again: written again"
     logic.disable()  # e.g. switched off from the Python console
     calls.clear()
-    assert applied() == [("enable", {**shipped, "scale": 8, "model": "/models/s8.onnx"})], "started again"
+    assert applied() == [("enable", own)], "started again"
 
     parameters.variant = "L"
     with pytest.raises(RuntimeError, match="no L model"):

@@ -19,6 +19,7 @@ from volsr_core.apps.options import (
     output_file, output_folder, parse_range, parse_rgb, parse_size,
 )
 from volsr_core.errors import WRITE_ERRNOS, InputError, OutputError, VolSRError, require_extra, write_error
+from volsr_core.runtime.models import DEFAULT_SCALE, default_variant
 from volsr_core.sr.network_config import VARIANTS
 
 
@@ -190,10 +191,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 # -- volsr upscale --------------------------------------------------------------------------------
-AUTO_VARIANT_RULE = ("auto: the largest shipped variant (L > M > S > XS) whose network time for one frame of --size "
-                     "(measured at start-up: one warm-up, then the median of 3 runs on zeros) is at most the time "
-                     "of one native full-size 1-spp render of the first camera of the first input, i.e. the "
-                     "network must be cheaper than rendering natively; the smallest shipped when none is")
+AUTO_VARIANT_RULE = ("auto: the largest shipped variant at --scale (L > M > S > XS) whose network time for one frame "
+                     "of --size (measured at start-up: one warm-up, then the median of 3 runs on zeros) is at most "
+                     "half the time of one LR render (1/--scale of --size) of the first camera of the first input, "
+                     "so that it buys more than rendering more pixels in the same time would; the smallest shipped "
+                     "when none is")
 
 
 def cmd_upscale(args: argparse.Namespace) -> int:
@@ -225,17 +227,21 @@ def cmd_upscale(args: argparse.Namespace) -> int:
         load_transfer_function(args.tf, name=args.tf_name)
     elif args.preset:
         get_preset(args.preset)
-    variant, model = args.variant, None
+    model, scale, variant = None, args.scale, args.variant
     if args.model:
         if args.budget_ms is not None:
             raise InputError(args.model, "--budget-ms chooses among the shipped models; give it without --model")
         model = Path(args.model)
-    elif variant != "auto" and args.budget_ms is None:
-        model = model_file(variant, args.scale)
-    if model is not None:
-        scale = open_engine(model, device=args.device).config.scale
-        if scale != args.scale:
-            raise InputError(model, f"the model upscales {scale}x, not {args.scale}x (--scale)")
+    else:
+        scale = scale or DEFAULT_SCALE
+        variant = variant or default_variant(scale)
+        if variant != "auto" and args.budget_ms is None:
+            model = model_file(variant, scale)
+    if model is not None:  # opened once, before any rendering: a missing extra or a bad file stops here
+        model_scale = open_engine(model, device=args.device).config.scale
+        if scale is not None and model_scale != scale:
+            raise InputError(model, f"the model upscales {model_scale}x, not {scale}x (--scale)")
+        scale = model_scale
 
     for part in stale_parts(out / "summary.md"):  # left by a killed run
         part.unlink(missing_ok=True)
@@ -260,13 +266,13 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                                           sample_distance=args.sample_distance, background=args.background)
             else:
                 if model is None:  # --variant auto, decided once at the first input that loads
-                    variant, model = batch.auto_variant(caster, cameras[0], args.size, args.scale, device=args.device)
-                pipeline = Pipeline(volume, tf, model, scale=args.scale, size=args.size, variant=variant,
+                    variant, model = batch.auto_variant(caster, cameras[0], args.size, scale, device=args.device)
+                pipeline = Pipeline(volume, tf, model, scale=scale, size=args.size, variant=variant,
                                     device=args.device, sample_distance=args.sample_distance,
                                     background=args.background)
             batch.upscale_cameras(pipeline, cameras, out / item.name, video=videos.get(item.name), fps=args.fps,
                                   side_by_side_panels=args.side_by_side, reference_spp=args.reference_spp,
-                                  summary=summary, bilinear_scale=args.scale)
+                                  summary=summary, bilinear_scale=scale)
         except OutputError:  # the outputs cannot be written: the other inputs would fail the same way
             raise
         except Exception as err:  # one bad input must not stop the others; Ctrl-C still stops the batch
@@ -274,14 +280,14 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                              else f"{summary.source}: {type(err).__name__}: {' '.join(str(err).split())}")
             print(f"volsr: error: {summary.error}", file=sys.stderr)
     failed = sum(s.error is not None for s in summaries)
-    how = f"within a {args.budget_ms:g} ms frame budget" if args.budget_ms is not None else f"{args.scale}x"
+    how = f"within a {args.budget_ms:g} ms frame budget" if args.budget_ms is not None else f"{scale}x"
     print(f"upscaled {len(summaries) - failed} of {len(summaries)} input(s) {how}"
           + (f" with {Path(str(model)).name}" if model is not None else "") + (f", {failed} failed" if failed else ""))
     for s in summaries:
         print("  " + s.line())
     out.mkdir(parents=True, exist_ok=True)
     with atomic_write(out / "summary.md", "w", encoding="utf-8") as fh:
-        fh.write(batch.summary_markdown(summaries, args.scale, Path(str(model)).name if model is not None else "-",
+        fh.write(batch.summary_markdown(summaries, scale, Path(str(model)).name if model is not None else "-",
                                         budget_ms=args.budget_ms))
     print(f"  summary: {out / 'summary.md'}")
     return 1 if failed else 0
@@ -313,8 +319,8 @@ def add_upscale_parser(sub) -> None:
     up.add_argument("--tf-name", metavar="NAME", help="which entry of a presets file --tf names")
     up.add_argument("--range", type=parse_range, default="auto", metavar="auto|none|LO,HI",
                     help="place the transfer function's design range (as for volsr render) [auto]")
-    up.add_argument("--scale", type=number(low=2, high=16, integer=True), default=4,
-                    help="upscaling factor of the model [4]")
+    up.add_argument("--scale", type=number(low=2, high=16, integer=True),
+                    help=f"upscaling factor [{DEFAULT_SCALE}; with --model, the model's]")
     up.add_argument("--size", type=parse_size, default=(1024, 1024), metavar="W[xH]", help="output size [1024]")
     path = up.add_mutually_exclusive_group()
     path.add_argument("--camera-path", metavar="FILE", help="camera path JSON (vtkCamera terms)")
@@ -338,15 +344,18 @@ def add_upscale_parser(sub) -> None:
                     "VolSR and bilinear against it (slow) [0: off]")
     up.add_argument("--model", metavar="FILE", help="model file, .onnx (onnxruntime) or .pt (PyTorch); default: the "
                     "shipped model of --variant at --scale")
-    up.add_argument("--variant", choices=VARIANTS + ("auto",), default="S",
-                    help=f"shipped model size [S]; shipped: {shipped_variants()}; " + AUTO_VARIANT_RULE)
+    up.add_argument("--variant", choices=VARIANTS + ("auto",),
+                    help="shipped model size [the smallest shipped at --scale: XS at 2x, the model that pays off on a "
+                    f"CPU (docs/performance.md)]; shipped: {shipped_variants()}; " + AUTO_VARIANT_RULE)
     up.add_argument("--budget-ms", type=number("ms per frame", 0, 60000, low_open=True), metavar="MS",
-                    help="frame-budget mode: per moving frame, the finest of native full size, the shipped models and "
-                    "TAAU alone (smaller scale first; at a scale, larger variant first, then TAAU) whose measured time "
-                    "fits MS (each timed once on the first camera, then tracked frame by frame, as VTK's "
-                    "AutoAdjustSampleDistances does); a camera "
-                    "that holds still refines instead, one more full-size jittered sample per frame (after N still "
-                    "frames: the native N-spp image); --scale then only sets the bilinear panel's size")
+                    help="frame-budget mode: per moving frame, the finest of native full size, the shipped models, "
+                    "TAAU alone and native renders at 1/2, 1/3, 1/4, 1/6 and 1/8 size stretched bilinearly (by the "
+                    "size rendered; at a size, larger variant first, then TAAU, then bilinear) whose measured time "
+                    "fits MS (each timed on the first camera, then tracked frame by frame, as VTK's "
+                    "AutoAdjustSampleDistances does; a model whose network costs more than half its LR render is "
+                    "left out); a camera that holds still refines instead, one more full-size jittered sample per "
+                    "frame (after N still frames: the native N-spp image); --scale then only sets the bilinear "
+                    "panel's size")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                     help="where rays are cast and the network runs [cpu]")
     up.add_argument("--sample-distance", type=MILLIMETRES, metavar="MM",

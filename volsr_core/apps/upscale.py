@@ -6,8 +6,9 @@
   1-spp render, a native render at 1/scale size upscaled bilinearly (what VTK's
   ``ImageSampleDistance`` does) and VolSR;
 - with ``reference_spp`` it also measures PSNR against an N-spp native render of every frame;
-- :func:`auto_variant` picks the largest shipped variant whose network time fits the frame budget
-  (:func:`choose_variant` is the rule).
+- :func:`auto_variant` picks the largest shipped variant whose network costs at most
+  :data:`~volsr_core.runtime.models.PAYING_NETWORK_SHARE` of an LR render (:func:`choose_variant`
+  is the rule).
 
 Every PNG and MP4 is written atomically (a temporary name in the same folder, then a rename), so
 an interrupted run leaves complete files or none; the next run into the same folder deletes what a
@@ -30,6 +31,7 @@ import numpy as np
 from volsr_core.atomic import stale_parts
 from volsr_core.images import mp4_writer, side_by_side, to_uint8, write_png
 from volsr_core.runtime.methods import Method, Native, ReducedSize, VolSR
+from volsr_core.runtime.models import PAYING_NETWORK_SHARE
 from volsr_core.sr.network_config import VARIANTS
 
 VARIANTS_LARGEST_FIRST = tuple(reversed(VARIANTS))
@@ -141,8 +143,8 @@ def network_ms(engine, low_resolution_size: tuple[int, int], repeats: int = 3) -
     return statistics.median(times)
 
 
-def native_render_ms(caster, camera, size: tuple[int, int]) -> float:
-    """ms of one full-size 1-spp render of ``camera`` (after a small warm-up render that compiles the kernels)."""
+def render_ms(caster, camera, size: tuple[int, int]) -> float:
+    """ms of one 1-spp render of ``camera`` at ``size`` (after a small warm-up render that compiles the kernels)."""
     caster.render(camera, 16, 16)
     started = time.perf_counter()
     caster.render(camera, size[0], size[1])
@@ -153,9 +155,9 @@ def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: s
                  log: Callable[[str], None] = print) -> tuple[str, Path]:
     """The shipped variant ``--variant auto`` takes, and its model file.
 
-    Budget: one native full-size 1-spp render of ``camera``. The shipped variants at ``scale``
-    are timed largest first (:func:`network_ms` on an LR frame of ``size / scale``) until one fits
-    (:func:`choose_variant`); the smallest shipped one is the fallback.
+    Budget: :data:`~volsr_core.runtime.models.PAYING_NETWORK_SHARE` of one LR render (``size / scale``,
+    1 spp) of ``camera``. The shipped variants at ``scale`` are timed largest first (:func:`network_ms`
+    on an LR frame) until one fits (:func:`choose_variant`); the smallest shipped one is the fallback.
     """
     from volsr_core.runtime.engines import open_engine
     from volsr_core.runtime.models import find_model, model_file, shipped_models
@@ -164,8 +166,9 @@ def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: s
     candidates = [v for v in VARIANTS_LARGEST_FIRST if v in shipped]
     if not candidates:
         find_model("S", scale)  # raises the one-line error naming what is shipped
-    budget = native_render_ms(caster, camera, size)
     lr_size = (-(-size[0] // scale), -(-size[1] // scale))
+    lr_ms = render_ms(caster, camera, lr_size)
+    budget = PAYING_NETWORK_SHARE * lr_ms
     measured: dict[str, float] = {}
     for variant in candidates:
         engine = open_engine(model_file(variant, scale), device=device)
@@ -174,8 +177,8 @@ def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: s
             break
     chosen = choose_variant(measured, budget, fallback=candidates[-1])
     times = ", ".join(f"{v} {ms:.0f} ms" for v, ms in measured.items())
-    log(f"variant auto: network per {size[0]}x{size[1]} frame {times}; budget (native 1-spp render) "
-        f"{budget:.0f} ms -> {chosen}")
+    log(f"variant auto: network per {size[0]}x{size[1]} frame {times}; budget {budget:.0f} ms "
+        f"({PAYING_NETWORK_SHARE:g} of the {lr_size[0]}x{lr_size[1]} LR render, {lr_ms:.0f} ms) -> {chosen}")
     return chosen, model_file(chosen, scale)
 
 
@@ -195,6 +198,7 @@ class InputSummary:
     psnr: dict[str, list[float]] = field(default_factory=dict)   # method -> dB per frame
     reference_spp: int = 0
     levels: dict[str, int] = field(default_factory=dict)  # frame-budget mode: frames made by each level
+    left_out: dict[str, str] = field(default_factory=dict)  # frame-budget mode: levels dropped, and why
     outputs: list[Path] = field(default_factory=list)
     error: str | None = None
 
@@ -213,12 +217,17 @@ class InputSummary:
         """Frame-budget mode's levels in the order first used, with their frames: "VolSR XS 2x 12, TAAU 2x 4"."""
         return ", ".join(f"{level} {count}" for level, count in self.levels.items())
 
+    def left_out_text(self) -> str:
+        """Frame-budget mode's dropped levels: "VolSR S 2x (network 105 ms, more than ...)"."""
+        return ", ".join(f"{level} ({why})" for level, why in self.left_out.items())
+
     def line(self) -> str:
         if self.error is not None:
             done = f" after {self.frames} frame(s)" if self.frames else ""
             return f"{self.name}: FAILED{done}: {self.error}"
         (w, h), (lw, lh) = self.size, self.low_resolution_size
-        text = (f"{self.name}: {self.frames} frames of {w}x{h} from {lw}x{lh}; VolSR ms per frame (median): "
+        source = "" if self.levels else f" from {lw}x{lh}"  # frame-budget mode: the levels' sizes vary
+        text = (f"{self.name}: {self.frames} frames of {w}x{h}{source}; VolSR ms per frame (median): "
                 f"LR render {self.ms('render_ms'):.1f}, network {self.ms('network_ms'):.1f}, "
                 f"total {self.ms('total_ms'):.1f}")
         if len(self.method_ms) > 1 or self.psnr:
@@ -227,6 +236,8 @@ class InputSummary:
             text += ": " + " | ".join(self.method_line(m) for m in self.method_ms)
         if self.levels:
             text += f"; frames per level: {self.levels_text()}"
+        if self.left_out:
+            text += f"; left out: {self.left_out_text()}"
         if self.outputs:
             text += f"; wrote {self.outputs[0].parent}/" + "".join(f", {p}" for p in self.outputs if p.suffix == ".mp4")
         return text
@@ -256,7 +267,8 @@ def summary_markdown(summaries: Sequence[InputSummary], scale: int, model: str, 
     if any(s.levels for s in summaries):
         lines += ["", "Frames per level (VolSR is what the budget chose for each frame; \"still\": refining a "
                   "still camera):"]
-        lines += [f"- {s.name}: {s.levels_text()}" for s in summaries if s.levels]
+        lines += [f"- {s.name}: {s.levels_text()}" + (f"; left out: {s.left_out_text()}" if s.left_out else "")
+                  for s in summaries if s.levels]
     return "\n".join(lines) + "\n"
 
 
@@ -325,6 +337,7 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
             state = getattr(pipeline, "state", None)  # a BudgetRenderer: the level that made the frame
             if state is not None:
                 summary.levels[state.level] = summary.levels.get(state.level, 0) + 1
+                summary.left_out = dict(pipeline.left_out)
             if reference_spp:
                 reference = render_supersampled(caster, camera, width, height, spp=reference_spp)
                 for name in ("VolSR", "bilinear", "native 1 spp"):

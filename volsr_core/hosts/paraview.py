@@ -32,6 +32,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from volsr_core.runtime.models import DEFAULT_SCALE, default_variant
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
@@ -270,8 +271,8 @@ class ViewUpscaler:
     """
 
     def __init__(self, view, display, source=None, volume: Volume | None = None, model: Any = None, *,
-                 scale: int = 4, variant: str = "S", device: str = "cpu", threads: int | None = None,
-                 sample_distance: float | None = None):
+                 scale: int | None = None, variant: str | None = None, device: str = "cpu",
+                 threads: int | None = None, sample_distance: float | None = None):
         if volume is None and source is None:
             raise ValueError("give the source or the volume")
         self.view, self.display, self.source = view, display, source
@@ -319,7 +320,8 @@ class FilterUpscaler:
     calls (its history makes the network's output temporally stable) and rebuilt when the model, variant
     or scale changes; a new input, transfer function, background or size drops the history.
 
-    - ``size`` (width, height), ``scale``, ``model`` (a file; "" = the shipped model of ``variant``);
+    - ``size`` (width, height); ``model``: a file, which upscales by its own scale, or "" for the
+      shipped model of ``variant`` at ``scale`` (by default XS 2x, the model that pays off on a CPU);
     - ``transfer_function_json``: a VolSR transfer function as JSON (``TransferFunction.to_dict``; what
       :func:`sync_filter` copies from a display); "" = ``preset`` placed on ``preset_range`` (LO < HI) or,
       by default, as ``volsr render --range auto`` places it;
@@ -331,9 +333,9 @@ class FilterUpscaler:
 
     def __init__(self):
         self.size = (256, 256)
-        self.scale = 4
+        self.scale = DEFAULT_SCALE
         self.model = ""
-        self.variant = "S"
+        self.variant = default_variant(DEFAULT_SCALE)
         self.preset = "CT-Bone"
         self.preset_range = (0.0, 0.0)
         self.transfer_function_json = ""
@@ -379,8 +381,8 @@ class FilterUpscaler:
         tf = self.transfer_function(self._volume)
         background = tuple(float(v) for v in self.background)
         if self.pipeline is None or key != self._key:
-            self.pipeline = Pipeline(self._volume, tf, self.model or None, scale=int(self.scale), size=size,
-                                     variant=self.variant, background=background)
+            self.pipeline = Pipeline(self._volume, tf, self.model or None, size=size, background=background,
+                                     scale=None if self.model else int(self.scale), variant=self.variant)
             self._key = key
         self.pipeline.update(volume=self._volume, transfer_function=tf, background=background, size=size)
         camera = self.camera_for(self._volume)
@@ -397,7 +399,7 @@ def _scalars_mtime(image) -> int:
 # the pvpython script's job ---------------------------------------------------------------------
 def orbit_and_upscale(volume: Volume, tf: TransferFunction, out: str | Path, *, frames: int = 24,
                       degrees: float = 360.0, elevation: float = 0.0, size: Sequence[int] = (512, 512),
-                      scale: int = 4, model: Any = None, variant: str = "S", device: str = "cpu",
+                      scale: int | None = None, model: Any = None, variant: str | None = None, device: str = "cpu",
                       threads: int | None = None, video: str | Path | None = None, fps: float = 24.0,
                       save_view: bool = False, side_by_side: bool = False,
                       background: Sequence[float] = (0.0, 0.0, 0.0), log=print) -> dict[str, Any]:
@@ -442,7 +444,7 @@ def orbit_and_upscale(volume: Volume, tf: TransferFunction, out: str | Path, *, 
             if side_by_side:
                 lw, lh = upscaler.pipeline.low_resolution_size
                 panels = [("ParaView 5.11", upscaler.last_view.astype(np.float32) / 255.0),
-                          (f"VolSR {scale}x from {lw}x{lh}", image)]
+                          (f"VolSR {upscaler.pipeline.scale}x from {lw}x{lh}", image)]
                 write_png(out / f"side_by_side_{i:04d}.png", panels_side_by_side(panels))
             if writer is not None:
                 writer.append_data(rgb8)
@@ -454,9 +456,10 @@ def orbit_and_upscale(volume: Volume, tf: TransferFunction, out: str | Path, *, 
     write_camera_path(out / "cameras.json", used_cameras)
     save_presets(out / "transfer_function.json", [replace(upscaler.last_transfer_function, name=tf.name or "paraview")])
     median = {k: float(np.median([t[k] for t in timings])) for k in timings[0]}
+    scale = upscaler.pipeline.scale
     summary = {"frames": frames, "size": [width, height], "scale": scale,
                "low_resolution_size": list(upscaler.pipeline.low_resolution_size),
-               "model": str(model) if model is not None else f"shipped {variant} {scale}x",
+               "model": str(model) if model is not None else f"shipped {variant or default_variant(scale)} {scale}x",
                "providers": list(upscaler.pipeline.engine.providers), "median_ms": median,
                "gradient_opacity_dropped": tf.gradient_opacity is not None and shown.gradient_opacity is None,
                "video": str(video) if video else None}

@@ -14,7 +14,8 @@ readers). Output: a vtkImageData of Size[0] x Size[1] x 1 pixels, spacing 1, ori
 unsigned char RGB, VTK's row order (row 0 at the bottom), i.e. what a render view would show, rendered by VolSR
 at 1/Scale and upscaled. Show it with MapScalars off to see the colours as they are.
 
-Properties: Size, Scale, Model (.onnx; empty: the shipped model of Variant), Variant, Preset + PresetRange
+Properties: Size, Scale, Model (.onnx, which upscales by its own scale; empty: the shipped model of Variant at
+Scale, by default XS 2x, the model that pays off on a CPU: docs/performance.md), Variant, Preset + PresetRange
 (LO < HI places the preset's design range there; else automatic placement) or TransferFunction (VolSR JSON,
 overrides the preset), the camera (CameraPosition, CameraFocalPoint, CameraViewUp, CameraViewAngle,
 CameraParallelProjection, CameraParallelScale; position = focal point: the anterior view framing the volume),
@@ -45,6 +46,7 @@ _fix_python_plugins()
 
 from paraview.util.vtkAlgorithm import smdomain, smhint, smproperty, smproxy  # noqa: E402
 from volsr_core._vtk import VTKPythonAlgorithmBase  # noqa: E402
+from volsr_core.runtime.models import DEFAULT_SCALE, default_variant  # noqa: E402
 
 _PRESETS = ("CT-Bone", "CT-AAA", "CT-Cardiac", "CT-Chest-Contrast-Enhanced", "CT-Soft-Tissue", "CT-Lung",
             "CT-Phantom", "MR-Default", "MR-Angio")
@@ -81,7 +83,7 @@ class VolSRUpscale(VTKPythonAlgorithmBase):
     def SetSize(self, width, height):
         self._set("size", (int(width), int(height)))
 
-    @smproperty.intvector(name="Scale", default_values=[4])
+    @smproperty.intvector(name="Scale", default_values=[DEFAULT_SCALE])
     @smdomain.intrange(min=2, max=16)
     def SetScale(self, scale):
         self._set("scale", int(scale))
@@ -92,9 +94,9 @@ class VolSRUpscale(VTKPythonAlgorithmBase):
     def SetModel(self, path):
         self._set("model", str(path or ""))
 
-    @smproperty.stringvector(name="Variant", default_values=["S"])
-    @smdomain.xml('<StringListDomain name="list"><String value="S"/><String value="M"/><String value="L"/>'
-                  '</StringListDomain>')
+    @smproperty.stringvector(name="Variant", default_values=[default_variant(DEFAULT_SCALE)])
+    @smdomain.xml('<StringListDomain name="list"><String value="XS"/><String value="S"/><String value="M"/>'
+                  '<String value="L"/></StringListDomain>')
     def SetVariant(self, variant):
         self._set("variant", str(variant))
 

@@ -30,7 +30,7 @@ def add_sr_volume(plotter: "pv.Plotter", volume: Any, scalars: str | np.ndarray 
                   cmap: Any = None, opacity: Any = None, shade: bool | None = None, ambient: float | None = None,
                   diffuse: float | None = None, specular: float | None = None,
                   specular_power: float | None = None, opacity_unit_distance: float | None = None,
-                  scale: int = 4, model: Any = None, variant: str = "S", layer: int | None = None,
+                  scale: int | None = None, model: Any = None, variant: str | None = None, layer: int | None = None,
                   device: str = "cpu", backend: str = "auto", fp16: bool = False, threads: int | None = None,
                   sample_distance: float | None = None, enabled: bool = True, show_scalar_bar: bool = False,
                   **add_volume_options: Any) -> VolSRPostProcess:

@@ -28,6 +28,7 @@ from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 
 from volsr_core.hosts.vtk_adapter import VolSRPostProcess
+from volsr_core.runtime.models import default_variant
 from volsr_core.scene.camera import transform_camera
 from volsr_core.scene.vtk_bridge import matrix_4x4, write_volume_property
 from volsr_core.sr.network_config import VARIANTS
@@ -148,23 +149,28 @@ class SlicerSession:
     - ``volume``: our Volume in LPS (:func:`volume_from_ijk_to_ras`); None reads the vtkVolume's
       vtkImageData and matrix (Slicer puts the IJK-to-RAS matrix there) and converts them;
     - ``model``, ``scale`` (2, 4, 8), ``variant`` (XS, S, M, L), ``device``, ``backend``, ``threads``,
-      ``sample_distance``: as :class:`VolSRPostProcess` takes them; ``layer``: the overlay's
-      window layer, at least :data:`SLICER_OVERLAY_LAYER`.
+      ``sample_distance``: as :class:`VolSRPostProcess` takes them (None scale and variant: the
+      Pipeline's defaults, VolSR XS 2x); ``layer``: the overlay's window layer, at least
+      :data:`SLICER_OVERLAY_LAYER`.
     """
 
     def __init__(self, renderer, vtk_volume, volume: Volume | None = None, model: Any = None, *,
-                 scale: int = 4, variant: str = "S", layer: int = SLICER_OVERLAY_LAYER, device: str = "cpu",
-                 backend: str = "auto", threads: int | None = None, sample_distance: float | None = None,
-                 enabled: bool = True):
-        if int(scale) not in SCALES:
+                 scale: int | None = None, variant: str | None = None, layer: int = SLICER_OVERLAY_LAYER,
+                 device: str = "cpu", backend: str = "auto", threads: int | None = None,
+                 sample_distance: float | None = None, enabled: bool = True):
+        if scale is not None and int(scale) not in SCALES:
             raise ValueError(f"scale must be one of {SCALES}, got {scale}")
-        if str(variant).upper() not in VARIANTS:
+        if variant is not None and str(variant).upper() not in VARIANTS:
             raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
-        self.scale, self.variant = int(scale), str(variant).upper()
         layer = max(int(layer), SLICER_OVERLAY_LAYER, renderer.GetLayer() + 1)
-        self.adapter = VolSRPostProcess(renderer, vtk_volume, volume, model, scale=self.scale, variant=self.variant,
+        self.adapter = VolSRPostProcess(renderer, vtk_volume, volume, model,
+                                        scale=None if scale is None else int(scale),
+                                        variant=None if variant is None else str(variant).upper(),
                                         layer=layer, device=device, backend=backend, threads=threads,
                                         sample_distance=sample_distance, enabled=enabled, world_matrix=RAS_TO_LPS)
+        self.scale = self.adapter.pipeline.scale
+        self.variant = str(variant).upper() if variant is not None else (
+            default_variant(self.scale) if model is None else "custom")
 
     @property
     def enabled(self) -> bool:

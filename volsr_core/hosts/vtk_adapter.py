@@ -50,7 +50,8 @@ class VolSRPostProcess:
       (:func:`~volsr_core.scene.vtk_bridge.volume_from_image`), and rebuilds it when either changes;
     - ``model``, ``scale``, ``variant``, ``device``, ``backend``, ``fp16``, ``threads``,
       ``sample_distance``: as :class:`~volsr_core.runtime.pipeline.Pipeline` takes them (None
-      model: the shipped one of ``variant`` at ``scale``);
+      model: the shipped one of ``variant`` at ``scale``, by default VolSR XS 2x, the model that
+      pays off on a CPU; a model file upscales by its own scale);
     - ``layer``: the window layer of the overlay renderer (default: the host renderer's + 1;
       3D Slicer wants 3); the window gets enough layers;
     - ``reset_angle`` (degrees), ``reset_zoom``: a camera that turned further than this between two
@@ -75,7 +76,7 @@ class VolSRPostProcess:
     """
 
     def __init__(self, renderer, vtk_volume, volume: Volume | None = None, model: Any = None, *,
-                 scale: int = 4, variant: str = "S", layer: int | None = None, device: str = "cpu",
+                 scale: int | None = None, variant: str | None = None, layer: int | None = None, device: str = "cpu",
                  backend: str = "auto", fp16: bool = False, threads: int | None = None,
                  sample_distance: float | None = None, reset_angle: float = 30.0, reset_zoom: float = 2.0,
                  enabled: bool = True, world_matrix: Any = None):

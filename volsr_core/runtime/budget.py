@@ -2,12 +2,19 @@
 
 As VTK's AutoAdjustSampleDistances picks its sample distance from the last frame times, a
 :class:`BudgetRenderer` keeps a running estimate of each level's ms per frame and renders every
-moving frame with the finest level whose estimate fits ``budget_ms``. The levels, finest first:
-native full size, then per scale from the smallest up the shipped models of that scale, largest
-variant first, then TAAU alone at that scale (:func:`levels`): each with its own history (a
-:class:`~volsr_core.runtime.pipeline.Pipeline`, or :class:`TaauLevel`). The order is measured
-(docs/performance.md): a model beats the TAAU it refines, and any method at a scale beats every
-method at the next one (TAAU 2x beats the 4x models by 3.6-5.2 dB at 512²), whatever their costs.
+moving frame with the finest level whose estimate fits ``budget_ms``. The levels, finest first
+(:func:`levels`): native full size, then by the size of the rendered frame, from 1/2 down: at a
+scale the shipped models (largest variant first), TAAU alone, then the reduced-size render
+stretched bilinearly (what VTK's ImageSampleDistance gives; also at 1/3 and 1/6); each with its
+own history (a :class:`~volsr_core.runtime.pipeline.Pipeline`, or a :class:`MethodLevel`). The
+order is measured (docs/performance.md): at a size a model beats the TAAU it refines and TAAU the
+bilinear upscale, and fewer rendered pixels lose whatever follows (TAAU 2x beats the 4x models by
+3.6-5.2 dB at 512²).
+
+A model whose network costs more than :data:`~volsr_core.runtime.models.PAYING_NETWORK_SHARE` of
+its LR render, as measured when the levels are timed, is left out (:func:`unpaid`): the same time
+spent rendering buys more, and at 1024² on a CPU the U-Net models were also below VolSR XS at their
+own scale.
 
 While the camera holds still, frames refine progressively instead: every frame adds one more
 Halton-jittered full-size sample per pixel (ray starts jittered per sample) to a running mean,
@@ -17,6 +24,7 @@ VTK's still render does; the next move returns to the budget.
 """
 from __future__ import annotations
 
+import statistics
 import time
 from dataclasses import dataclass, field
 from typing import Any, Sequence
@@ -24,7 +32,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from volsr_core.render.raycaster import RayCaster
-from volsr_core.runtime.methods import Taau
+from volsr_core.runtime.methods import ReducedSize, Taau
+from volsr_core.runtime.models import PAYING_NETWORK_SHARE
 from volsr_core.runtime.pipeline import Pipeline
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
@@ -33,44 +42,68 @@ from volsr_core.sr.network_config import VARIANTS
 from volsr_core.temporal.jitter import halton_jitter
 
 VARIANT_ORDER = tuple(reversed(VARIANTS))  # larger first: better at the same scale
+BILINEAR_FACTORS = (2, 3, 4, 6, 8)  # reduced sizes drawn bilinearly (volsr bench's --factors)
+CALIBRATION_FRAMES = 3  # timed frames per level before the first frame (one frame alone was off by up to 25% here)
 STILL_SEED = 10**6  # ray-start seeds of still samples, apart from the moving frames' (which count frames)
 
 
 @dataclass(frozen=True)
 class Level:
-    """One way to make a frame: ``scale`` 1 (native full size), a shipped model's scale and ``variant``,
-    or TAAU alone at ``scale`` (``variant`` None)."""
+    """One way to make a frame: ``scale`` 1 (native full size); a shipped model's scale and ``variant``;
+    TAAU alone at ``scale`` (``variant`` None); or, ``bilinear``, a render at 1/``scale`` size stretched
+    bilinearly."""
 
     scale: int
     variant: str | None = None
+    bilinear: bool = False
 
     @property
     def label(self) -> str:
         if self.scale == 1:
             return "native 1 spp"
+        if self.bilinear:
+            return f"native 1/{self.scale} size + bilinear"
         return f"TAAU {self.scale}x" if self.variant is None else f"VolSR {self.variant} {self.scale}x"
 
 
-def levels(shipped: Sequence[dict[str, Any]]) -> list[Level]:
-    """Native full size, then per scale (smallest first) the shipped models (registry entries) of that
-    scale, larger variant first, then TAAU at that scale."""
+def levels(shipped: Sequence[dict[str, Any]], factors: Sequence[int] = BILINEAR_FACTORS) -> list[Level]:
+    """Native full size, then by scale (smallest first): the shipped models (registry entries) of that
+    scale, larger variant first, TAAU at that scale, and the 1/scale-size render + bilinear (``factors``)."""
     models = [Level(int(e["scale"]), e["variant"]) for e in shipped]
     taau = [Level(scale) for scale in {lv.scale for lv in models}]
+    reduced = [Level(int(f), bilinear=True) for f in factors if int(f) > 1]
 
     def finest_first(level: Level) -> tuple:
         rank = VARIANT_ORDER.index(level.variant) if level.variant in VARIANT_ORDER else len(VARIANT_ORDER)
-        return level.scale, level.variant is None, rank
+        return level.scale, level.bilinear, level.variant is None, rank
 
-    return [Level(1)] + sorted(models + taau, key=finest_first)
+    return [Level(1)] + sorted(models + taau + reduced, key=finest_first)
 
 
-class TaauLevel:
-    """TAAU alone at ``scale`` (:class:`~volsr_core.runtime.methods.Taau` on ``caster``), with the part of
-    the :class:`~volsr_core.runtime.pipeline.Pipeline` interface the budget renderer uses."""
+def unpaid(estimates: dict[Level, float]) -> dict[Level, str]:
+    """The model levels whose network, their ms beyond TAAU's at the same scale, costs more than
+    :data:`PAYING_NETWORK_SHARE` of the LR render (the 1/scale-size + bilinear level's ms), with why;
+    a model without both of those levels among ``estimates`` is kept."""
+    left_out = {}
+    for level, ms in estimates.items():
+        taau, render = estimates.get(Level(level.scale)), estimates.get(Level(level.scale, bilinear=True))
+        if level.variant is None or taau is None or render is None:
+            continue
+        network = ms - taau
+        if network > PAYING_NETWORK_SHARE * render:
+            left_out[level] = (f"network {network:.0f} ms, more than {PAYING_NETWORK_SHARE:g} of the {render:.0f} ms "
+                               "LR render")
+    return left_out
 
-    def __init__(self, caster: RayCaster, size: tuple[int, int], scale: int):
-        self.method = Taau(caster, size, scale)
-        self.low_resolution_size = (size[0] // scale, size[1] // scale)
+
+class MethodLevel:
+    """TAAU alone or a reduced-size render + bilinear (a :mod:`~volsr_core.runtime.methods` method on the
+    renderer's caster), with the part of the :class:`~volsr_core.runtime.pipeline.Pipeline` interface the
+    budget renderer uses."""
+
+    def __init__(self, method: Taau | ReducedSize):
+        self.method = method
+        self.low_resolution_size = method.low_resolution_size
         self.last_timings: dict[str, float] = {}
         self.last_low_resolution = None
 
@@ -99,15 +132,17 @@ class BudgetRenderer:
 
     - ``choices``: the :class:`Level` list to choose from, finest first (default :func:`levels` of the
       shipped models, less the TAAU levels whose scale does not divide ``size``); ``model_files`` maps
-      a model level to its model file (default: the shipped one);
+      a model level to its model file (default: the shipped one). The model levels :func:`unpaid` finds
+      when the levels are timed are then dropped from ``choices``; ``left_out`` says why;
     - ``smoothing``: weight of a new measurement in a level's running ms estimate;
     - ``finer_margin``: a finer level is taken only when its estimate is below this fraction of the
       budget (hysteresis: levels do not alternate frame by frame, which would drop the history);
     - ``device``, ``threads``, ``sample_distance``, ``background``: as :class:`Pipeline` takes them.
 
-    Every level is timed once on the first camera before the first frame (kernels compile, sessions
-    warm up), which seeds the estimates. ``render(camera)`` returns float32 (H, W, 3) in [0, 1];
-    ``state`` says what the frame was. Like a :class:`Pipeline` it has ``size``, ``scale`` and
+    Every level is timed on the first camera before the first frame (a warm-up frame, in which kernels
+    compile and sessions warm up, then the median of ``CALIBRATION_FRAMES``), which seeds the
+    estimates. ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``state`` says what the frame
+    was. Like a :class:`Pipeline` it has ``size``, ``scale`` and
     ``low_resolution_size`` (the level drawn last; 1 and ``size`` while still), ``caster``,
     ``last_timings`` and ``last_low_resolution``, so the batch and the comparison methods take it.
     """
@@ -124,24 +159,27 @@ class BudgetRenderer:
         self.budget_ms, self.size = float(budget_ms), (int(size[0]), int(size[1]))
         self.smoothing, self.finer_margin = float(smoothing), float(finer_margin)
         if choices is None:
-            choices = [lv for lv in levels(shipped_models())
-                       if lv.variant is not None or (self.size[0] % lv.scale == 0 and self.size[1] % lv.scale == 0)]
+            choices = [lv for lv in levels(shipped_models()) if lv.variant is not None or lv.bilinear
+                       or (self.size[0] % lv.scale == 0 and self.size[1] % lv.scale == 0)]
         self.choices = list(choices)
         files = dict(model_files or {})
         self.caster = RayCaster(volume, transfer_function, sample_distance=sample_distance, device=device,
                                 background=background, start_jitter="ign")
-        self.pipelines: dict[Level, Pipeline | TaauLevel] = {}
+        self.pipelines: dict[Level, Pipeline | MethodLevel] = {}
         for level in self.choices:
-            if level.scale > 1 and level.variant is None:
+            if level.bilinear:
+                self.pipelines[level] = MethodLevel(ReducedSize(self.caster, self.size, level.scale))
+            elif level.scale > 1 and level.variant is None:
                 if self.size[0] % level.scale or self.size[1] % level.scale:
                     raise ValueError(f"TAAU {level.scale}x needs a size divisible by {level.scale}, got {self.size}")
-                self.pipelines[level] = TaauLevel(self.caster, self.size, level.scale)
+                self.pipelines[level] = MethodLevel(Taau(self.caster, self.size, level.scale))
             elif level.scale > 1:
                 model = files.get(level) or model_file(level.variant, level.scale)
                 self.pipelines[level] = Pipeline(volume, transfer_function, model, scale=level.scale, size=self.size,
                                                  variant=level.variant, device=device, threads=threads,
                                                  sample_distance=sample_distance, background=background)
         self.estimates: dict[Level, float] = {}
+        self.left_out: dict[str, str] = {}
         self.current: Level | None = None
         self.state = BudgetState()
         self.last_timings: dict[str, float] = {}
@@ -163,14 +201,22 @@ class BudgetRenderer:
 
     # timing ----------------------------------------------------------------------------------------
     def _calibrate(self, camera: Camera) -> None:
-        """One untimed and one timed frame of every level on ``camera``; their histories are then dropped."""
+        """One untimed frame of every level on ``camera``, then the median of ``CALIBRATION_FRAMES`` timed
+        ones; their histories are then dropped, and so are the levels :func:`unpaid` names."""
         for level in self.choices:
             self._render_level(level, camera)
-            started = time.perf_counter()
-            self._render_level(level, camera)
-            self.estimates[level] = 1000.0 * (time.perf_counter() - started)
+            times = []
+            for _ in range(CALIBRATION_FRAMES):
+                started = time.perf_counter()
+                self._render_level(level, camera)
+                times.append(1000.0 * (time.perf_counter() - started))
+            self.estimates[level] = statistics.median(times)
             if level in self.pipelines:
                 self.pipelines[level].reset("calibrated")
+        for level, why in unpaid(self.estimates).items():
+            self.choices.remove(level)
+            del self.pipelines[level]  # its estimate stays, for the record
+            self.left_out[level.label] = why
 
     def choose(self) -> Level:
         """The finest level whose estimate fits the budget (a finer one than the current only with margin);

@@ -156,6 +156,10 @@ class Taau(Method):
     def label(self) -> str:
         return f"TAAU {self.scale}x"
 
+    @property
+    def low_resolution_size(self) -> tuple[int, int]:
+        return self.size[0] // self.scale, self.size[1] // self.scale
+
     def reset(self) -> None:
         self.upsampler.reset()
         self.previous = None

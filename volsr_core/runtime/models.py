@@ -8,8 +8,25 @@ from typing import Any
 
 from volsr_core.errors import InputError
 from volsr_core.hashing import file_sha256
+from volsr_core.sr.network_config import VARIANTS
 
 REGISTRY = "models.json"
+
+DEFAULT_SCALE = 2
+"""The scale every host and ``volsr upscale`` take unless told: at 2x the learned path (VolSR XS)
+lies above the native + bilinear curve at equal time on a CPU; no 4x or 8x point does
+(docs/performance.md)."""
+
+PAYING_NETWORK_SHARE = 0.5
+"""The most a network may cost, as a share of the LR render it upscales, to be worth running
+(``volsr upscale --variant auto``, and the frame-budget mode's model levels).
+
+The same time spent rendering buys pixels instead: along the native + bilinear curve PSNR rises
+2.3-3.3 dB per doubling of the rendered pixels at 512² and 2.7-3.9 at 1024² (1/4 -> 1/2 size, the
+four volumes of docs/performance.md, 2 degrees per frame). A network costing half the LR render must
+add about 1.3-2.3 dB (log2(1.5) doublings) to the bilinear upscale to pay off: what VolSR XS 2x adds
+(1.3-2.5 dB at 512²) for a network of 0.08-0.18 LR renders; the U-Net variants would need far more
+on a CPU (S 2x's network costs 2.2-4.8 LR renders at 512² and 1024²)."""
 
 
 def models_dir() -> Path:
@@ -24,7 +41,14 @@ def shipped_models() -> list[dict[str, Any]]:
     return json.loads(path.read_text(encoding="utf-8"))["models"]
 
 
-def find_model(variant: str = "S", scale: int = 4) -> dict[str, Any]:
+def default_variant(scale: int = DEFAULT_SCALE) -> str:
+    """The variant taken at ``scale`` unless one is named: the smallest (fastest) shipped there,
+    XS at 2x and 4x, S at 8x; "S" when none ships at ``scale`` (the error then names what does)."""
+    shipped = {e["variant"] for e in shipped_models() if e["scale"] == scale}
+    return next((v for v in VARIANTS if v in shipped), "S")
+
+
+def find_model(variant: str = "XS", scale: int = DEFAULT_SCALE) -> dict[str, Any]:
     """The registry entry for ``variant`` at ``scale``; a one-line InputError naming what there is."""
     for entry in shipped_models():
         if entry["variant"] == variant.upper() and entry["scale"] == scale:
@@ -33,7 +57,7 @@ def find_model(variant: str = "S", scale: int = 4) -> dict[str, Any]:
     raise InputError(models_dir(), f"no shipped model for variant {variant} at {scale}x (shipped: {have})")
 
 
-def model_file(variant: str = "S", scale: int = 4, kind: str = "onnx") -> Path:
+def model_file(variant: str = "XS", scale: int = DEFAULT_SCALE, kind: str = "onnx") -> Path:
     """The path of a shipped model file (``kind`` "onnx" or "pt"), after checking its SHA-256."""
     entry = find_model(variant, scale)
     path = models_dir() / entry["files"][kind]

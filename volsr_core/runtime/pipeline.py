@@ -28,6 +28,10 @@ class Pipeline:
 
     - ``model``: an .onnx or .pt file, an ``nn.Module``, or None for the shipped model of
       ``variant`` at ``scale`` (resources/models, SHA-256 checked);
+    - ``scale``: the upscaling factor; None: the model's own, or for a shipped model
+      :data:`~volsr_core.runtime.models.DEFAULT_SCALE` (2); a model of another scale is an error;
+    - ``variant``: None: :func:`~volsr_core.runtime.models.default_variant`, the fastest shipped at
+      ``scale`` (XS at 2x: the model that pays off on a CPU, docs/performance.md);
     - ``size``: output (width, height) in pixels; any size: the LR frame is ceil(size / scale)
       and the output is cropped to ``size``;
     - ``device``: "cpu" or "cuda", for the ray caster and the network;
@@ -43,18 +47,20 @@ class Pipeline:
     """
 
     def __init__(self, volume: Volume, transfer_function: TransferFunction, model: Any = None, *,
-                 scale: int = 4, size: tuple[int, int] = (512, 512), variant: str = "S", device: str = "cpu",
+                 scale: int | None = None, size: tuple[int, int] = (512, 512), variant: str | None = None,
+                 device: str = "cpu",
                  backend: str = "auto", fp16: bool = False, threads: int | None = None,
                  sample_distance: float | None = None, background: tuple[float, float, float] = (0.0, 0.0, 0.0),
                  max_turn: float = 30.0, max_zoom: float = 2.0):
         if model is None:
-            from volsr_core.runtime.models import model_file
+            from volsr_core.runtime.models import DEFAULT_SCALE, default_variant, model_file
 
-            model = model_file(variant, scale, "onnx" if backend != "torch" else "pt")
+            scale = DEFAULT_SCALE if scale is None else scale
+            model = model_file(variant or default_variant(scale), scale, "onnx" if backend != "torch" else "pt")
         self.engine = open_engine(model, backend=backend, device=device, fp16=fp16, threads=threads)
-        if self.engine.config.scale != scale:
+        if scale is not None and self.engine.config.scale != scale:
             raise ValueError(f"the model upscales {self.engine.config.scale}x, not {scale}x")
-        self.scale = int(scale)
+        self.scale = int(self.engine.config.scale)
         # ray starts jittered per pixel and frame (seeded by the frame number): the temporal history averages
         # the offsets instead of keeping a fixed start's rings
         self._caster_options = {"sample_distance": sample_distance, "device": device, "start_jitter": "ign"}
