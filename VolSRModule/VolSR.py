@@ -404,10 +404,10 @@ class VolSRLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.render()
 
     # on / off ----------------------------------------------------------------------------------------
-    def enable(self, volumeNode, scale: int | None = 2, variant: str = "XS", model=None, preset: str | None = None,
-               device: str = "cpu", viewIndex: int | None = None):
-        """Draw ``volumeNode`` with VolSR in the 3D view; returns the SlicerSession. ``scale`` None: the
-        model file's own."""
+    def enable(self, volumeNode, scale: int | None = None, variant: str | None = None, model=None,
+               preset: str | None = None, device: str = "cpu", viewIndex: int | None = None):
+        """Draw ``volumeNode`` with VolSR in the 3D view; returns the SlicerSession. ``scale`` and ``variant``
+        None: a model file's own scale, else the shipped XS 2x (the defaults)."""
         self.ensureDependencies()
         from volsr_core.hosts.slicer import SlicerSession
 
