@@ -39,9 +39,9 @@ def scene(tmp_path_factory):
 def test_levels_run_finest_first():
     shipped = [{"scale": 4, "variant": "S"}, {"scale": 2, "variant": "S"}, {"scale": 4, "variant": "M"}]
     assert [lv.label for lv in levels(shipped)] == [
-        "native 1 spp", "VolSR S 2x", "TAAU 2x", "native 1/2 size + bilinear", "native 1/3 size + bilinear",
-        "VolSR M 4x", "VolSR S 4x", "TAAU 4x", "native 1/4 size + bilinear", "native 1/6 size + bilinear",
-        "native 1/8 size + bilinear"]
+        "native 1 spp", "VolSR S 2x", "TAAU 2x", "native 1/2 size + bilinear", "native 1/2.5 size + bilinear",
+        "native 1/3 size + bilinear", "VolSR M 4x", "VolSR S 4x", "TAAU 4x", "native 1/4 size + bilinear",
+        "native 1/5 size + bilinear", "native 1/6 size + bilinear", "native 1/8 size + bilinear"]
 
 
 def test_unpaid_names_the_models_whose_network_costs_more_than_half_the_lr_render():

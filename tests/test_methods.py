@@ -48,6 +48,10 @@ def test_reduced_size_renders_pixel_centres_and_stretches_them_over_the_view(cas
     small = np.random.default_rng(0).random((6, 8, 3), dtype=np.float32)
     assert np.allclose(bicubic.upscale(small), np.clip(upscale_bicubic(small, 4), 0, 1))
     assert method.label == "native 1/3 size + bilinear" and bicubic.kind == "bicubic"
+    fractional = ReducedSize(caster, SIZE, 2.5)  # VTK's ImageSampleDistance need not be whole either
+    assert fractional.low_resolution_size == (19, 16) and fractional.label == "native 1/2.5 size + bilinear"
+    lr = caster.render(camera, 19, 16).color
+    assert np.array_equal(fractional(camera).image, resize_bilinear(lr, *SIZE))
     with pytest.raises(ValueError, match="interpolation"):
         ReducedSize(None, SIZE, 2, "nearest")
 

@@ -349,8 +349,9 @@ def add_upscale_parser(sub) -> None:
                     f"CPU (docs/performance.md)]; shipped: {shipped_variants()}; " + AUTO_VARIANT_RULE)
     up.add_argument("--budget-ms", type=number("ms per frame", 0, 60000, low_open=True), metavar="MS",
                     help="frame-budget mode: per moving frame, the finest of native full size, the shipped models, "
-                    "TAAU alone and native renders at 1/2, 1/3, 1/4, 1/6 and 1/8 size stretched bilinearly (by the "
-                    "size rendered; at a size, larger variant first, then TAAU, then bilinear) whose measured time "
+                    "TAAU alone and native renders at 1/2, 1/2.5, 1/3, 1/4, 1/5, 1/6 and 1/8 size stretched "
+                    "bilinearly (by the size rendered; at a size, larger variant first, then TAAU, then bilinear) "
+                    "whose measured time "
                     "fits MS (each timed on the first camera, then tracked frame by frame, as VTK's "
                     "AutoAdjustSampleDistances does; a model whose network costs more than half its LR render is "
                     "left out); a camera that holds still refines instead, one more full-size jittered sample per "

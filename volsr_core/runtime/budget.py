@@ -5,7 +5,8 @@ As VTK's AutoAdjustSampleDistances picks its sample distance from the last frame
 moving frame with the finest level whose estimate fits ``budget_ms``. The levels, finest first
 (:func:`levels`): native full size, then by the size of the rendered frame, from 1/2 down: at a
 scale the shipped models (largest variant first), TAAU alone, then the reduced-size render
-stretched bilinearly (what VTK's ImageSampleDistance gives; also at 1/3 and 1/6); each with its
+stretched bilinearly (what VTK's ImageSampleDistance gives; also at 1/2.5, 1/3, 1/5 and 1/6, between
+the scales, as VTK's distance is continuous); each with its
 own history (a :class:`~volsr_core.runtime.pipeline.Pipeline`, or a :class:`MethodLevel`). The
 order is measured (docs/performance.md): at a size a model beats the TAAU it refines and TAAU the
 bilinear upscale, and fewer rendered pixels lose whatever follows (TAAU 2x beats the 4x models by
@@ -42,7 +43,7 @@ from volsr_core.sr.network_config import VARIANTS
 from volsr_core.temporal.jitter import halton_jitter
 
 VARIANT_ORDER = tuple(reversed(VARIANTS))  # larger first: better at the same scale
-BILINEAR_FACTORS = (2, 3, 4, 6, 8)  # reduced sizes drawn bilinearly (volsr bench's --factors)
+BILINEAR_FACTORS = (2, 2.5, 3, 4, 5, 6, 8)  # reduced sizes drawn bilinearly: volsr bench's --factors and the gaps
 CALIBRATION_FRAMES = 3  # timed frames per level before the first frame (one frame alone was off by up to 25% here)
 STILL_SEED = 10**6  # ray-start seeds of still samples, apart from the moving frames' (which count frames)
 
@@ -53,7 +54,7 @@ class Level:
     TAAU alone at ``scale`` (``variant`` None); or, ``bilinear``, a render at 1/``scale`` size stretched
     bilinearly."""
 
-    scale: int
+    scale: float  # whole but for bilinear levels
     variant: str | None = None
     bilinear: bool = False
 
@@ -62,16 +63,16 @@ class Level:
         if self.scale == 1:
             return "native 1 spp"
         if self.bilinear:
-            return f"native 1/{self.scale} size + bilinear"
+            return f"native 1/{self.scale:g} size + bilinear"
         return f"TAAU {self.scale}x" if self.variant is None else f"VolSR {self.variant} {self.scale}x"
 
 
-def levels(shipped: Sequence[dict[str, Any]], factors: Sequence[int] = BILINEAR_FACTORS) -> list[Level]:
+def levels(shipped: Sequence[dict[str, Any]], factors: Sequence[float] = BILINEAR_FACTORS) -> list[Level]:
     """Native full size, then by scale (smallest first): the shipped models (registry entries) of that
     scale, larger variant first, TAAU at that scale, and the 1/scale-size render + bilinear (``factors``)."""
     models = [Level(int(e["scale"]), e["variant"]) for e in shipped]
     taau = [Level(scale) for scale in {lv.scale for lv in models}]
-    reduced = [Level(int(f), bilinear=True) for f in factors if int(f) > 1]
+    reduced = [Level(f, bilinear=True) for f in factors if f > 1]
 
     def finest_first(level: Level) -> tuple:
         rank = VARIANT_ORDER.index(level.variant) if level.variant in VARIANT_ORDER else len(VARIANT_ORDER)

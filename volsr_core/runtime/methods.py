@@ -104,19 +104,21 @@ class Native(Method):
 
 
 class ReducedSize(Method):
-    """round(size / ``factor``) pixels at their centres, upscaled to ``size`` by ``interpolation``."""
+    """round(size / ``factor``) pixels at their centres, upscaled to ``size`` by ``interpolation``;
+    ``factor`` need not be whole (VTK's ImageSampleDistance is not)."""
 
-    def __init__(self, caster: RayCaster | None, size: tuple[int, int], factor: int,
+    def __init__(self, caster: RayCaster | None, size: tuple[int, int], factor: float,
                  interpolation: str = "bilinear"):
         super().__init__(size)
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
-        self.caster, self.scale, self.kind = caster, int(factor), interpolation
+        self.caster, self.kind = caster, interpolation
+        self.scale = int(factor) if float(factor).is_integer() else float(factor)
         self.frame = 0
 
     @property
     def label(self) -> str:
-        return f"native 1/{self.scale} size + {self.kind}"
+        return f"native 1/{self.scale:g} size + {self.kind}"
 
     @property
     def low_resolution_size(self) -> tuple[int, int]:
