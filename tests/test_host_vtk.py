@@ -222,3 +222,20 @@ def test_the_coordinate_rule_vtk_world_is_our_lps_world():
     vtk_camera.SetViewAngle(40.0)
     horizontal = camera_from_vtk(vtk_camera, aspect=2.0)
     assert horizontal.projection_matrix(2.0)[0, 0] == pytest.approx(1 / np.tan(np.radians(20.0)))
+
+
+def test_without_a_model_the_adapter_draws_with_the_default_volsr_xs_2x(ct_avm):
+    """The hosts' default is the model that pays off on a CPU (docs/performance.md): VolSR XS 2x, the frame a
+    Pipeline with the same defaults makes."""
+    from volsr_core.hosts.vtk_adapter import VolSRPostProcess
+
+    volume, tf = ct_avm
+    host = scene(volume, tf)
+    adapter = VolSRPostProcess(host.renderer, host.actor, volume)
+    assert adapter.pipeline.scale == 2 and adapter.pipeline.engine.path.name == "volsr-XS-2x.onnx"
+    assert adapter.pipeline.low_resolution_size == (W // 2, H // 2)
+    host.window.Render()
+    assert adapter.frames == 1 and adapter.last_error == ""
+    expected = Pipeline(volume, tf, size=(W, H)).render(adapter.last_camera)
+    assert psnr(adapter.last_image, expected) > 60, "the same model, camera and jitter: the same frame"
+    host.close()
