@@ -15,7 +15,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from volsr_core.errors import InputError, require_extra
-from volsr_core.runtime.base_filter import FILTER_KEY, filter_image, read_filter_metadata
+from volsr_core.runtime.base_filter import FILTER_KEY, Scratch, filter_image, read_filter_metadata
 from volsr_core.sr.history import stand_in_history
 
 METADATA_KEY = "volsr.network"  # the ONNX metadata entry holding the NetworkConfig as JSON
@@ -87,6 +87,7 @@ class OnnxEngine:
         self.config = _network_config(meta[METADATA_KEY], self.path)
         self.input_names = [i.name for i in self.session.get_inputs()]
         self.base_filter = None  # (weights (n, 3, k, k), bias (n, 3)) when the CPU kernel runs the network
+        self._scratch = Scratch()  # the kernel's work buffers, kept between calls
         if not self.config.widths and FILTER_KEY in meta and self.providers[0] == "CPUExecutionProvider":
             self.base_filter = read_filter_metadata(meta[FILTER_KEY], self.path, self.config.base_kernel,
                                                     self.config.base_orientations)
@@ -98,7 +99,8 @@ class OnnxEngine:
             values["history"] = stand_in_history(lr, self.config.scale) if history is None else history
         if self.base_filter is not None:
             base = values["history"] if self.config.taau_base else stand_in_history(lr, self.config.scale)
-            return np.stack([filter_image(image[:3].transpose(1, 2, 0), *self.base_filter).transpose(2, 0, 1)
+            return np.stack([filter_image(image[:3].transpose(1, 2, 0), *self.base_filter, scratch=self._scratch)
+                             .transpose(2, 0, 1)
                              for image in base])
         # the exporter drops inputs a configuration never reads (motion when N = 0 without recurrence)
         feed = {name: np.ascontiguousarray(values[name], dtype=np.float32) for name in self.input_names}
