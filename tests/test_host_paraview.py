@@ -196,3 +196,27 @@ def test_script_reports_bad_input_on_one_line(paraview_venv, tmp_path):
     assert result.returncode == 2, result.stdout + result.stderr
     errors = [line for line in result.stderr.splitlines() if line.startswith("volsr_paraview: error:")]
     assert len(errors) == 1 and "missing.nii.gz" in errors[0]
+
+
+def test_filter_keeps_its_pipeline_when_a_model_file_ignores_scale_and_variant(model):
+    """The filter's logic in this venv's VTK (no ParaView needed): a model file upscales by its own scale, so
+    the Scale and Variant properties must not rebuild its Pipeline (which would drop the history); without a
+    file they pick the shipped model, so changing them does."""
+    pytest.importorskip("vtkmodules")
+    from volsr_core.hosts.paraview import FilterUpscaler
+    from volsr_core.io import make_phantom
+    from volsr_core.scene.volume import Volume
+    from volsr_core.scene.vtk_bridge import image_data
+
+    image = image_data(Volume.from_record(make_phantom(shape=(24, 24, 24))))
+    upscaler = FilterUpscaler()
+    upscaler.size, upscaler.model = (48, 32), str(model)
+    first = upscaler.upscale(image)
+    pipeline = upscaler.pipeline
+    assert first.shape == (32, 48, 3) and pipeline.scale == 4
+    upscaler.scale, upscaler.variant = 8, "S"
+    upscaler.upscale(image)
+    assert upscaler.pipeline is pipeline, "a model file's pipeline rebuilt for properties it does not read"
+    upscaler.model = ""
+    upscaler.upscale(image)
+    assert upscaler.pipeline is not pipeline and upscaler.pipeline.scale == 8

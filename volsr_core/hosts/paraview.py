@@ -317,8 +317,9 @@ class FilterUpscaler:
 
     Set the attributes (the plugin's property setters do), then call :meth:`upscale` with the input
     vtkImageData; it returns float32 (H, W, 3) in [0, 1], row 0 at the top. The Pipeline is kept between
-    calls (its history makes the network's output temporally stable) and rebuilt when the model, variant
-    or scale changes; a new input, transfer function, background or size drops the history.
+    calls (its history makes the network's output temporally stable) and rebuilt when the model changes,
+    or, without a model file, the variant or scale; a new input, transfer function, background or size
+    drops the history.
 
     - ``size`` (width, height); ``model``: a file, which upscales by its own scale, or "" for the
       shipped model of ``variant`` at ``scale`` (by default XS 2x, the model that pays off on a CPU);
@@ -374,7 +375,7 @@ class FilterUpscaler:
         from volsr_core.scene.vtk_bridge import volume_from_image
 
         size = tuple(max(int(v), 1) for v in self.size)
-        key = (str(self.model), self.variant, int(self.scale))
+        key = (str(self.model),) if self.model else ("", self.variant, int(self.scale))  # a file has its own
         if self._volume_key != (image, image.GetMTime(), _scalars_mtime(image)):
             self._volume = volume_from_image(image, source="<ParaView input>")
             self._volume_key = (image, image.GetMTime(), _scalars_mtime(image))
