@@ -40,11 +40,12 @@ KERNEL = "volsr_core/temporal/taau.py"
 HISTORY_FRAMES = 2  # calls before these have no (or a one-frame) history: not timed
 
 
-def module_at(commit: str, folder: Path) -> ModuleType:
-    """The TAAU module as it was at ``commit``, imported from a copy in ``folder``."""
-    source = subprocess.run(["git", "-C", str(REPO), "show", f"{commit}:{KERNEL}"], check=True,
+def module_at(commit: str, folder: Path, kernel: str = KERNEL) -> ModuleType:
+    """The module ``kernel`` (a path in the repository; by default TAAU's) as it was at ``commit``, imported
+    from a copy in ``folder``."""
+    source = subprocess.run(["git", "-C", str(REPO), "show", f"{commit}:{kernel}"], check=True,
                             capture_output=True, text=True).stdout
-    path = folder / f"taau_{commit.replace('/', '_')}.py"
+    path = folder / f"{Path(kernel).stem}_{commit.replace('/', '_')}.py"
     path.write_text(source, encoding="utf-8")
     spec = importlib.util.spec_from_file_location(path.stem, path)
     module = importlib.util.module_from_spec(spec)
