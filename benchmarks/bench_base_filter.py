@@ -14,21 +14,17 @@ between their outputs.
 """
 from __future__ import annotations
 
-import argparse
 import statistics
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from bench_taau import DATA, HISTORY_FRAMES, lr_frames, module_at
+from bench_taau import HISTORY_FRAMES, lr_frames, module_at, orbit_parser, orbit_scene, table_header, table_row
 
-from volsr_core.apps.bench.scenes import load_bench_volume
-from volsr_core.render import RayCaster
 from volsr_core.runtime import base_filter as current
 from volsr_core.runtime.engines import OnnxEngine
 from volsr_core.runtime.models import model_file
-from volsr_core.scene.camera_paths import orbit_around
 from volsr_core.temporal.taau import TemporalUpsampler
 
 KERNEL = "volsr_core/runtime/base_filter.py"
@@ -36,25 +32,12 @@ ROUNDS = 5  # passes over the estimates
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--volume", default="CT_AVM.nii.gz:CT-AAA:0,446")
-    parser.add_argument("--sizes", default="512,1024")
-    parser.add_argument("--scales", default="2,4")
-    parser.add_argument("--degrees", type=float, default=2.0)
-    parser.add_argument("--frames", type=int, default=12)
-    parser.add_argument("--against", metavar="COMMIT")
-    args = parser.parse_args()
-    spec = args.volume if args.volume.startswith("phantom") or Path(args.volume.split(":")[0]).exists() \
-        else str(DATA / args.volume)
-    scene = load_bench_volume(spec)
-    caster = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign")
-    cameras = orbit_around(caster.visible_bounds(), args.frames, args.degrees)
+    args = orbit_parser(__doc__.split("\n\n")[0]).parse_args()
+    scene, caster, cameras = orbit_scene(args)
     with tempfile.TemporaryDirectory() as folder:
         modules = [current] + ([module_at(args.against, Path(folder), KERNEL)] if args.against else [])
-        against = f" | {args.against} ms | ratio | max difference |" if args.against else " |"
-        header = "| output | model | filter ms" + against
-        print(f"{scene.label}, {args.frames} frames of {args.degrees:g}°, {ROUNDS} rounds\n\n{header}")
-        print("|---" * (header.count("|") - 1) + "|")
+        print(f"{scene.label}, {args.frames} frames of {args.degrees:g}°, {ROUNDS} rounds\n")
+        print(table_header("| output | model | filter ms", args.against))
         for size in (int(s) for s in args.sizes.split(",")):
             for scale in (int(s) for s in args.scales.split(",")):
                 weights = OnnxEngine(model_file("XS", scale)).base_filter
@@ -71,11 +54,8 @@ def main() -> None:
                             outputs.append(module.filter_image(estimate, *weights, scratch=scratches[k]))
                             times[k].append(1000.0 * (time.perf_counter() - started))
                         difference = max([difference] + [float(np.abs(o - outputs[0]).max()) for o in outputs[1:]])
-                ms = [statistics.median(t) for t in times]
-                row = f"| {size}² | XS {scale}x | {ms[0]:.2f}"
-                if args.against:
-                    row += f" | {ms[1]:.2f} | {ms[0] / ms[1]:.2f} | {difference:.1e}"
-                print(row + " |", flush=True)
+                print(table_row(f"| {size}² | XS {scale}x", [statistics.median(t) for t in times], difference),
+                      flush=True)
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ from types import ModuleType
 
 import numpy as np
 
-from volsr_core.apps.bench.scenes import load_bench_volume
+from volsr_core.apps.bench.scenes import BenchVolume, load_bench_volume
 from volsr_core.render import RayCaster
 from volsr_core.scene.camera_paths import orbit_around
 from volsr_core.temporal import halton_jitter, jitter_phases
@@ -85,34 +85,57 @@ def time_side_by_side(modules: list[ModuleType], frames: list[tuple], scale: int
     return [statistics.median(ms) for ms in times], difference
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def table_header(columns: str, against: str | None) -> str:
+    """The markdown header and rule of a side-by-side table: ``columns``, then ``against``'s ms, the ratio and the
+    largest difference when there is a second kernel."""
+    header = columns + (f" | {against} ms | ratio | max difference |" if against else " |")
+    return header + "\n" + "|---" * (header.count("|") - 1) + "|"
+
+
+def table_row(cells: str, ms: list[float], difference: float) -> str:
+    """One row of :func:`table_header`'s table: ``cells``, then each kernel's median ``ms`` (current first), their
+    ratio and ``difference`` when there are two."""
+    row = f"{cells} | {ms[0]:.2f}"
+    if len(ms) > 1:
+        row += f" | {ms[1]:.2f} | {ms[0] / ms[1]:.2f} | {difference:.1e}"
+    return row + " |"
+
+
+def orbit_parser(description: str) -> argparse.ArgumentParser:
+    """The options a side-by-side kernel benchmark shares: the volume, sizes, scales, orbit and ``--against``."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--volume", default="CT_AVM.nii.gz:CT-AAA:0,446")
     parser.add_argument("--sizes", default="512,1024")
     parser.add_argument("--scales", default="2,4")
     parser.add_argument("--degrees", type=float, default=2.0)
     parser.add_argument("--frames", type=int, default=12)
-    parser.add_argument("--passes", type=int, default=3)
     parser.add_argument("--against", metavar="COMMIT")
-    args = parser.parse_args()
+    return parser
+
+
+def orbit_scene(args: argparse.Namespace) -> tuple[BenchVolume, RayCaster, list]:
+    """The bench volume of ``args.volume`` (a bare file name is looked for in ``../shared/data/volumes``), its
+    ray caster (ray starts jittered, as ``volsr bench`` renders) and the orbit's cameras."""
     spec = args.volume if args.volume.startswith("phantom") or Path(args.volume.split(":")[0]).exists() \
         else str(DATA / args.volume)
     scene = load_bench_volume(spec)
     caster = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign")
-    cameras = orbit_around(caster.visible_bounds(), args.frames, args.degrees)
+    return scene, caster, orbit_around(caster.visible_bounds(), args.frames, args.degrees)
+
+
+def main() -> None:
+    parser = orbit_parser(__doc__.split("\n\n")[0])
+    parser.add_argument("--passes", type=int, default=3)
+    args = parser.parse_args()
+    scene, caster, cameras = orbit_scene(args)
     with tempfile.TemporaryDirectory() as folder:
         modules = [current] + ([module_at(args.against, Path(folder))] if args.against else [])
-        against = f" | {args.against} ms | ratio | max difference |" if args.against else " |"
-        header = "| output | scale | TAAU ms" + against
-        print(f"{scene.label}, {args.frames} frames of {args.degrees:g}°, {args.passes} passes\n\n{header}")
-        print("|---" * (header.count("|") - 1) + "|")
+        print(f"{scene.label}, {args.frames} frames of {args.degrees:g}°, {args.passes} passes\n")
+        print(table_header("| output | scale | TAAU ms", args.against))
         for size in (int(s) for s in args.sizes.split(",")):
             for scale in (int(s) for s in args.scales.split(",")):
                 ms, difference = time_side_by_side(modules, lr_frames(caster, cameras, size, scale), scale, args.passes)
-                row = f"| {size}² | {scale}x | {ms[0]:.2f}"
-                if args.against:
-                    row += f" | {ms[1]:.2f} | {ms[0] / ms[1]:.2f} | {difference:.1e}"
-                print(row + " |", flush=True)
+                print(table_row(f"| {size}² | {scale}x", ms, difference), flush=True)
 
 
 if __name__ == "__main__":
