@@ -12,6 +12,7 @@ import numpy as np
 
 from volsr_core.render.features import FeatureFrame
 from volsr_core.runtime.base_filter import Scratch, filter_image
+from volsr_core.runtime.layout import to_channels_first, to_image_clipped
 from volsr_core.scene.camera import Camera, rotation_between
 from volsr_core.sr.history import HistoryFeed
 from volsr_core.temporal.resample import upscale_bilinear
@@ -76,7 +77,7 @@ class StatefulUpscaler:
         self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=self.config.previous_frames + 1)
         self.history = HistoryFeed(self.config)
         self.base_filter = getattr(engine, "base_filter", None)  # variant XS on the CPU: no network inputs
-        self._scratch = Scratch()
+        self._scratch = Scratch()  # work buffers kept between frames: the base filter's, the network's history
         self.resets = 0
         self.last_reset_reason = ""
 
@@ -134,14 +135,15 @@ class StatefulUpscaler:
         lr = np.stack([f[0] for f in held])[None]
         vectors = np.stack([f[1] for f in held])[None]
         jitters = np.stack([f[2] for f in held])[None]
-        history = self.history(frame.color, motion.transpose(1, 2, 0), tuple(jitter), frame.motion_depth,
-                               view_rotation(frame.camera, frame.previous_camera),
-                               frame.pixels_per_voxel)  # (H, W, 3) or None
-        if history is not None:
-            history = np.ascontiguousarray(history.transpose(2, 0, 1)[None])
-        out = self.engine(lr, vectors, jitters, history)[0].transpose(1, 2, 0)
-        self.history.keep(out)
-        return np.clip(out, 0.0, 1.0)
+        parts = self.history.parts(frame.color, motion.transpose(1, 2, 0), tuple(jitter), frame.motion_depth,
+                                   view_rotation(frame.camera, frame.previous_camera), frame.pixels_per_voxel)
+        history = None
+        if parts is not None:  # (1, C, H, W) in a buffer kept between frames: the engine reads it during the call
+            shape = (sum(part.shape[2] for part in parts),) + parts[0].shape[:2]
+            history = to_channels_first(parts, self._scratch.get("history", shape))[None]
+        out = self.engine(lr, vectors, jitters, history)[0]  # (3, H, W)
+        self.history.keep(out.transpose(1, 2, 0))
+        return to_image_clipped(out)
 
     def _filtered(self, frame: FeatureFrame) -> np.ndarray:
         """:meth:`upscale` for a network that is only its base filter, run by the engine's CPU kernel

@@ -81,13 +81,22 @@ class HistoryFeed:
     def __call__(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
                  depth: np.ndarray | None = None, rotation: float | None = None,
                  pixels_per_voxel: float | None = None) -> np.ndarray | None:
+        parts = self.parts(colour, motion, jitter, depth, rotation, pixels_per_voxel)
+        return None if parts is None else parts[0] if len(parts) == 1 else np.concatenate(parts, axis=-1)
+
+    def parts(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
+              depth: np.ndarray | None = None, rotation: float | None = None,
+              pixels_per_voxel: float | None = None) -> list[np.ndarray] | None:
+        """This frame's history as the (H, W, c) images whose channels, one after the other, make it (None for
+        none): the estimate, then, with ``taau_aux``, what its blend threw away. The same call as the feed
+        itself, for a caller that lays them out its own way without first joining them (a 7-channel copy)."""
         estimate = None
         if self.taau is not None:
-            estimate = self.taau(colour, motion, jitter, depth, rotation,
-                                 pixels_per_voxel if self.fine_sampling else None)
-            if self.taau_aux:  # (H, W, 7): the estimate, then what its blend threw away
-                estimate = np.concatenate([estimate, self.taau.last_aux], axis=-1)
-        return pick_history(self.mode, self.previous, estimate)
+            estimate = [self.taau(colour, motion, jitter, depth, rotation,
+                                  pixels_per_voxel if self.fine_sampling else None)]
+            if self.taau_aux:
+                estimate.append(self.taau.last_aux)
+        return pick_history(self.mode, None if self.previous is None else [self.previous], estimate)
 
     def keep(self, output: np.ndarray) -> None:
         """The network's output for the frame just fed, (H, W, 3)."""

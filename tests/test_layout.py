@@ -1,0 +1,41 @@
+"""The layout kernels between the project's (H, W, C) images and the networks' (C, H, W) tensors."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from volsr_core.runtime.layout import to_channels_first, to_image_clipped
+
+
+def test_channels_first_is_numpys_join_and_transpose_into_the_buffer_given():
+    image = np.random.default_rng(0).normal(size=(37, 53, 7)).astype(np.float32)  # two parts: 3 and 4 channels
+    buffer = np.full((7, 37, 53), np.nan, np.float32)
+    out = to_channels_first([image[..., :3], image[..., 3:]], buffer)
+    assert out is buffer and np.array_equal(out, image.transpose(2, 0, 1))
+    assert np.array_equal(to_channels_first([image[:, ::-1]]), np.ascontiguousarray(image[:, ::-1].transpose(2, 0, 1)))
+    with pytest.raises(ValueError, match=r"\(7, 37, 53\)"):
+        to_channels_first([image], np.empty((7, 53, 37), np.float32))
+
+
+def test_image_clipped_is_the_transposed_output_clipped_to_0_1():
+    planes = np.random.default_rng(1).normal(0.5, 0.6, size=(3, 29, 41)).astype(np.float32)
+    image = to_image_clipped(planes)
+    assert image.shape == (29, 41, 3) and image.flags.c_contiguous
+    assert np.array_equal(image, np.clip(planes.transpose(1, 2, 0), 0.0, 1.0))
+    assert image.min() == 0.0 and image.max() == 1.0, "the fixture reaches past both ends"
+
+
+def test_the_history_feeds_parts_join_to_the_history_it_gives():
+    """HistoryFeed.parts (what the upscaler lays out channels first) holds the channels of HistoryFeed's history."""
+    from volsr_core.sr.history import HistoryFeed
+    from volsr_core.sr.network_config import NetworkConfig
+
+    rng = np.random.default_rng(2)
+    colour, motion = rng.random((12, 10, 3), dtype=np.float32), rng.normal(0, 0.5, (12, 10, 2)).astype(np.float32)
+    config = NetworkConfig(scale=4, taau_base=True, taau_aux=True)
+    joined, parted = HistoryFeed(config), HistoryFeed(config)
+    for jitter in ((0.1, -0.2), (-0.3, 0.25)):
+        history, parts = joined(colour, motion, jitter), parted.parts(colour, motion, jitter)
+        assert history.shape == (48, 40, 7) and [p.shape[2] for p in parts] == [3, 4]
+        assert np.array_equal(to_channels_first(parts), history.transpose(2, 0, 1))
+    assert HistoryFeed(NetworkConfig(scale=4)).parts(colour, motion, (0.0, 0.0)) is None

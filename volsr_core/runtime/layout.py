@@ -1,0 +1,61 @@
+"""Moving images between the layouts of the project and of its networks, as numba kernels.
+
+Images are (H, W, C), channels last (docs/conventions.md); the ONNX networks take and give (C, H, W). On a
+512² frame numpy's joining and transposing copies of TAAU's 7-channel history and the network's output (strided
+reads, one thread) cost 5.6 ms per frame around a ~20 ms network: here each is one parallel pass over rows.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numba
+import numpy as np
+
+
+@numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
+def _to_channels_first(image: np.ndarray, out: np.ndarray, first: int) -> None:
+    height, width, channels = image.shape
+    for y in numba.prange(height):
+        for c in range(channels):
+            row = out[first + c, y]
+            for x in range(width):
+                row[x] = image[y, x, c]
+
+
+@numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
+def _to_image_clipped(planes: np.ndarray, out: np.ndarray) -> None:
+    channels, height, width = planes.shape
+    for y in numba.prange(height):
+        for c in range(channels):
+            row = planes[c, y]
+            for x in range(width):
+                out[y, x, c] = min(max(row[x], np.float32(0.0)), np.float32(1.0))
+
+
+def to_channels_first(images: Sequence[np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
+    """``images``, each (H, W, c), as one contiguous (C, H, W) float32 array holding their channels one after the
+    other (what ``np.concatenate(images, -1).transpose(2, 0, 1)`` holds, without the joined copy), written into
+    ``out`` when given (a buffer kept between frames: fresh multi-MB arrays cost page faults)."""
+    images = [np.ascontiguousarray(image, dtype=np.float32) for image in images]
+    height, width = images[0].shape[:2]
+    shape = (sum(image.shape[2] for image in images), height, width)
+    if any(image.shape[:2] != (height, width) for image in images):
+        raise ValueError(f"images of different sizes: {[image.shape for image in images]}")
+    if out is None:
+        out = np.empty(shape, np.float32)
+    elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a contiguous float32 array of shape {shape}, got {out.dtype} {out.shape}")
+    first = 0
+    for image in images:
+        _to_channels_first(image, out, first)
+        first += image.shape[2]
+    return out
+
+
+def to_image_clipped(planes: np.ndarray) -> np.ndarray:
+    """``planes`` (C, H, W) as a new (H, W, C) float32 image clipped to [0, 1] (what a network's output becomes
+    before anyone sees it)."""
+    planes = np.ascontiguousarray(planes, dtype=np.float32)
+    out = np.empty(planes.shape[1:] + planes.shape[:1], np.float32)
+    _to_image_clipped(planes, out)
+    return out
