@@ -2,7 +2,8 @@
 
 Images are (H, W, C), channels last (docs/conventions.md); the ONNX networks take and give (C, H, W). On a
 512² frame numpy's joining and transposing copies of TAAU's 7-channel history and the network's output (strided
-reads, one thread) cost 5.6 ms per frame around a ~20 ms network: here each is one parallel pass over rows.
+reads, one thread) cost 7-10 ms around a ~20 ms network; here each is one parallel pass over rows, 1.6-2.1 ms
+together (``benchmarks/bench_layout.py``).
 """
 from __future__ import annotations
 
