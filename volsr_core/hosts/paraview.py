@@ -375,7 +375,7 @@ class FilterUpscaler:
         from volsr_core.scene.vtk_bridge import volume_from_image
 
         size = tuple(max(int(v), 1) for v in self.size)
-        key = (str(self.model),) if self.model else ("", self.variant, int(self.scale))  # a file has its own
+        key = (str(self.model),) if self.model else ("", self.variant, int(self.scale))  # a file: its own scale
         if self._volume_key != (image, image.GetMTime(), _scalars_mtime(image)):
             self._volume = volume_from_image(image, source="<ParaView input>")
             self._volume_key = (image, image.GetMTime(), _scalars_mtime(image))

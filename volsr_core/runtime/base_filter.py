@@ -9,8 +9,8 @@ it: one pass lays the clipped, padded channels apart, a second sums each tap ove
 loops vectorise; a pair sums both filters in the same pass and blends) and interleaves the result;
 work buffers stay in a :class:`Scratch` between frames. On TAAU's 512² estimates (2 cores, medians,
 ``benchmarks/bench_base_filter.py``): 1.7 ms for the 5x5 pair of XS 2x, 2.1 ms for the 9x9 filter of
-XS 4x, where onnxruntime's depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9) without its transposes. The weights
-travel in the ONNX file's metadata (:data:`FILTER_KEY`, written by :func:`~volsr_core.runtime.export.
+XS 4x, where onnxruntime's depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9) without its transposes. The
+weights travel in the ONNX file's metadata (:data:`FILTER_KEY`, written by :func:`~volsr_core.runtime.export.
 export_onnx`); the graph stays the reference the kernel is tested against.
 """
 from __future__ import annotations
@@ -126,8 +126,9 @@ def _filter_rows_pair(planes: np.ndarray, weights: np.ndarray, bias: np.ndarray,
                       out: np.ndarray) -> None:
     """:func:`_filter_rows` for a pair (``weights`` (2, C, k, k), ``bias`` (2, C)): both filters summed in one
     pass over each tap's row (one load, two products), then each pixel takes filter ``second[y, x]`` by a blend
-    with weight 0 or 1 (no branch, so it vectorises too): 3.5 times faster than summing the two apart and
-    picking per pixel (4.95 against 1.53 ms at 512²)."""
+    with weight 0 or 1 (no branch, so it vectorises too): :func:`filter_image` with XS 2x's pair took 1.70 ms
+    per 512² call against 2.01 for summing the two apart and picking per pixel (``benchmarks/bench_base_filter.py
+    --against 49a94bb``)."""
     height, width, channels = out.shape
     k = weights.shape[2]
     for y in numba.prange(height):
