@@ -138,10 +138,10 @@ def _rectify(h0, h1, h2, box, ly, lx):
 
 
 @numba.njit(**_NB)
-def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, tent, cap, disocclusion,
+def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
          rectify, out, new_history, aux):
     hr_h, hr_w = out.shape[0], out.shape[1]
-    lr_h = lr.shape[0]
+    lr_h, lr_w = lr.shape[0], lr.shape[1]
     v = (y + 0.5) / scale - 0.5 - jy
     ly = min(max(int(math.floor(v + 0.5)), 0), lr_h - 1)
     fy = math.floor(v)
@@ -151,51 +151,55 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s
     dy1 = dy0 - 1.0
     wy0 = math.exp(-dy0 * dy0 * inv2s2)
     wy1 = math.exp(-dy1 * dy1 * inv2s2)
-    # The HR pixels of one LR sample share its motion, so along a run of them the history is fetched
-    # at consecutive columns with the same rows and vertical weights: the vertical Catmull-Rom pass of
-    # each column (k0..k3, columns ix - 1 .. ix + 2) is kept and slides by one column per pixel.
-    run_lx = -1
-    last_ix = -2
-    k00 = k01 = k02 = k10 = k11 = k12 = k20 = k21 = k22 = k30 = k31 = k32 = np.float32(0.0)
-    for x in range(hr_w):
-        lx = int(cols[x, 0])
-        x0 = int(cols[x, 1])
-        x1 = int(cols[x, 2])
-        wx0 = cols[x, 3]
-        wx1 = cols[x, 4]
-        # 1. the current estimate: 2x2 Gaussian splat, blended with bilinear weights by ``tent``
-        w00, w01, w10, w11 = wy0 * wx0, wy0 * wx1, wy1 * wx0, wy1 * wx1
-        a = w00 + w01 + w10 + w11
-        inv = 1.0 / a
-        if tent > 0.0:
-            fx = cols[x, 5]
-            keep = (1.0 - tent) * inv
-            w00 = keep * w00 + tent * (1.0 - dy0) * (1.0 - fx)
-            w01 = keep * w01 + tent * (1.0 - dy0) * fx
-            w10 = keep * w10 + tent * dy0 * (1.0 - fx)
-            w11 = keep * w11 + tent * dy0 * fx
-            inv = 1.0
-        e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
-        e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
-        e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
+    # The HR pixels whose nearest LR sample is lx (a run: columns runs[lx] .. runs[lx + 1] - 1) share its
+    # motion, depth and box, so the history's rows, their Catmull-Rom weights and the disocclusion gate are
+    # found once per run; along the run the history is fetched at consecutive columns, so the vertical
+    # Catmull-Rom pass of each column (k0..k3, columns ix - 1 .. ix + 2) is kept and slides by one column.
+    for lx in range(lr_w):
         d = depth[ly, lx]
-        n = 0.0
-        h0 = h1 = h2 = 0.0
-        if has_history:
-            sx = x + scale * motion[ly, lx, 0]
-            sy = y + scale * motion[ly, lx, 1]
-            if -0.5 < sx < hr_w - 0.5 and -0.5 < sy < hr_h - 0.5:
+        mx = scale * motion[ly, lx, 0]
+        sy = y + scale * motion[ly, lx, 1]
+        rows_in = has_history and -0.5 < sy < hr_h - 0.5
+        sy = min(max(sy, 0.0), hr_h - 1.0)
+        iy = int(sy)
+        ty = sy - iy
+        iy1 = min(iy + 1, hr_h - 1)
+        rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))
+        ay = _catmull_rom_weights(ty)
+        gated = disocclusion > 0.0 and box[ly, lx, 6] > 0.5
+        last_ix = -2
+        k00 = k01 = k02 = k10 = k11 = k12 = k20 = k21 = k22 = k30 = k31 = k32 = np.float32(0.0)
+        for x in range(runs[lx], runs[lx + 1]):
+            x0 = int(cols[x, 1])
+            x1 = int(cols[x, 2])
+            wx0 = cols[x, 3]
+            wx1 = cols[x, 4]
+            # 1. the current estimate: 2x2 Gaussian splat, blended with bilinear weights by ``tent``
+            w00, w01, w10, w11 = wy0 * wx0, wy0 * wx1, wy1 * wx0, wy1 * wx1
+            a = w00 + w01 + w10 + w11
+            inv = 1.0 / a
+            if tent > 0.0:
+                fx = cols[x, 5]
+                keep = (1.0 - tent) * inv
+                w00 = keep * w00 + tent * (1.0 - dy0) * (1.0 - fx)
+                w01 = keep * w01 + tent * (1.0 - dy0) * fx
+                w10 = keep * w10 + tent * dy0 * (1.0 - fx)
+                w11 = keep * w11 + tent * dy0 * fx
+                inv = 1.0
+            e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
+            e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
+            e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
+            n = 0.0
+            h0 = h1 = h2 = 0.0
+            sx = x + mx
+            if rows_in and -0.5 < sx < hr_w - 0.5:
                 sx = min(max(sx, 0.0), hr_w - 1.0)
-                sy = min(max(sy, 0.0), hr_h - 1.0)
                 ix = int(sx)
-                iy = int(sy)
                 tx = sx - ix
-                ty = sy - iy
                 ix1 = min(ix + 1, hr_w - 1)
-                iy1 = min(iy + 1, hr_h - 1)
                 # 4. disocclusion (depth, where the neighbourhood shows parallax)
                 dropped = False
-                if disocclusion > 0.0 and box[ly, lx, 6] > 0.5:
+                if gated:
                     hd = min(min(history[iy, ix, 4], history[iy, ix1, 4]),
                              min(history[iy1, ix, 4], history[iy1, ix1, 4]))
                     dropped = d - hd > disocclusion
@@ -205,21 +209,16 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s
                     bottom = history[iy1, ix, 3] + tx * (history[iy1, ix1, 3] - history[iy1, ix, 3])
                     n = min(max(top + ty * (bottom - top), 0.0), cap)
                 if n > 0.0:
-                    # rows and weights per pixel: carried along the run instead, they made the kernel slower
-                    rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))
-                    ay = _catmull_rom_weights(ty)
-                    if lx != run_lx or ix != last_ix + 1:
-                        if lx != run_lx or ix != last_ix:  # a new run: all four columns
-                            k00, k01, k02 = _history_column(history, max(ix - 1, 0), rows, ay)
-                            k10, k11, k12 = _history_column(history, ix, rows, ay)
-                            k20, k21, k22 = _history_column(history, ix1, rows, ay)
-                            k30, k31, k32 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
-                    else:  # the next pixel of the run: one new column
+                    if ix == last_ix + 1:  # the next column of the run: one new vertical pass
                         k00, k01, k02 = k10, k11, k12
                         k10, k11, k12 = k20, k21, k22
                         k20, k21, k22 = k30, k31, k32
                         k30, k31, k32 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
-                    run_lx = lx
+                    elif ix != last_ix:  # a new start: all four columns (the same column again: kept)
+                        k00, k01, k02 = _history_column(history, max(ix - 1, 0), rows, ay)
+                        k10, k11, k12 = _history_column(history, ix, rows, ay)
+                        k20, k21, k22 = _history_column(history, ix1, rows, ay)
+                        k30, k31, k32 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
                     last_ix = ix
                     ax0, ax1, ax2, ax3 = _catmull_rom_weights(tx)
                     h0 = ax0 * k00 + ax1 * k10 + ax2 * k20 + ax3 * k30
@@ -227,39 +226,40 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s
                     h2 = ax0 * k02 + ax1 * k12 + ax2 * k22 + ax3 * k32
                     if rectify:  # 5. clamp into the YCoCg box of the 3x3 LR neighbourhood
                         h0, h1, h2 = _rectify(h0, h1, h2, box, ly, lx)
-        # 7. blend
-        if n > 0.0:
-            inv = 1.0 / (n + a)
-            o0 = (n * h0 + a * e0) * inv
-            o1 = (n * h1 + a * e1) * inv
-            o2 = (n * h2 + a * e2) * inv
-        else:
-            o0, o1, o2 = e0, e1, e2
-        out[y, x, 0] = o0
-        out[y, x, 1] = o1
-        out[y, x, 2] = o2
-        new_history[y, x, 0] = o0
-        new_history[y, x, 1] = o1
-        new_history[y, x, 2] = o2
-        new_history[y, x, 3] = min(n + a, cap)
-        new_history[y, x, 4] = d
-        aux[y, x, 0] = h0  # what the history said (reprojected, rectified; 0 where there was none) ...
-        aux[y, x, 1] = h1
-        aux[y, x, 2] = h2
-        aux[y, x, 3] = n / (n + a)  # ... and its share of the blend
+            # 7. blend
+            if n > 0.0:
+                inv = 1.0 / (n + a)
+                o0 = (n * h0 + a * e0) * inv
+                o1 = (n * h1 + a * e1) * inv
+                o2 = (n * h2 + a * e2) * inv
+            else:
+                o0, o1, o2 = e0, e1, e2
+            out[y, x, 0] = o0
+            out[y, x, 1] = o1
+            out[y, x, 2] = o2
+            new_history[y, x, 0] = o0
+            new_history[y, x, 1] = o1
+            new_history[y, x, 2] = o2
+            new_history[y, x, 3] = min(n + a, cap)
+            new_history[y, x, 4] = d
+            aux[y, x, 0] = h0  # what the history said (reprojected, rectified; 0 where there was none) ...
+            aux[y, x, 1] = h1
+            aux[y, x, 2] = h2
+            aux[y, x, 3] = n / (n + a)  # ... and its share of the blend
 
 
 @numba.njit(parallel=True, cache=True)
-def _kernel(history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, tent, cap, disocclusion, rectify,
-            out, new_history, aux):
+def _kernel(history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
+            rectify, out, new_history, aux):
     for y in numba.prange(out.shape[0]):
-        _row(y, history, has_history, lr, motion, depth, box, cols, scale, jy, inv2s2, tent, cap, disocclusion, rectify,
+        _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion, rectify,
              out, new_history, aux)
 
 
-def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> np.ndarray:
+def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> tuple[np.ndarray, np.ndarray]:
     """Per HR column: nearest LR sample, the 2x2 window's two columns, their Gaussian weights and the
-    fractional position between them (the bilinear weight of the second)."""
+    fractional position between them (the bilinear weight of the second); and the runs of HR columns
+    whose nearest LR sample is the same: column lx's run is ``runs[lx]`` .. ``runs[lx + 1] - 1``."""
     u = (np.arange(hr_w) + 0.5) / scale - 0.5 - jx
     cols = np.empty((hr_w, 6), dtype=np.float64)
     cols[:, 0] = np.clip(np.floor(u + 0.5), 0, lr_w - 1)
@@ -269,7 +269,9 @@ def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> np.n
     cols[:, 3] = np.exp(-(u - f) ** 2 * inv2s2)
     cols[:, 4] = np.exp(-(u - f - 1) ** 2 * inv2s2)
     cols[:, 5] = u - f
-    return cols
+    runs = np.searchsorted(cols[:, 0], np.arange(lr_w + 1)).astype(np.int64)
+    runs[lr_w] = hr_w
+    return cols, runs
 
 
 def view_rotation(camera, previous) -> float:
@@ -382,11 +384,12 @@ class TemporalUpsampler:
         cap *= 1.0 - (1.0 - self.smooth_count) * smooth
         inv2s2 = 1.0 / (2.0 * sigma * sigma)
         key = (w, jx, sigma)
-        cols = self._cols.get(key)
-        if cols is None:
+        columns = self._cols.get(key)
+        if columns is None:
             if len(self._cols) > 512:
                 self._cols.clear()
-            cols = self._cols[key] = _columns(w * s, w, s, jx, inv2s2)
+            columns = self._cols[key] = _columns(w * s, w, s, jx, inv2s2)
+        cols, runs = columns
         if self._box is None or self._box.shape[:2] != (h, w):
             self._box = np.empty((h, w, 8), dtype=np.float32)
         _prepass(lr, motion, s, self.dis_motion, self._box)
@@ -394,7 +397,7 @@ class TemporalUpsampler:
             np.empty(shape, dtype=np.float32)
         out = np.empty(shape[:2] + (3,), dtype=np.float32)
         aux = np.empty(shape[:2] + (4,), dtype=np.float32)
-        _kernel(history, has, lr, motion, depth_arr, self._box, cols, s, jy, inv2s2, tent, cap, disocclusion,
+        _kernel(history, has, lr, motion, depth_arr, self._box, cols, runs, s, jy, inv2s2, tent, cap, disocclusion,
                 not static, out, new_history, aux)
         self.last_aux = aux
         self._spare = self.history if has else None
