@@ -156,6 +156,33 @@ def test_reset_and_size_change_start_again_from_the_current_frame():
     np.testing.assert_array_equal(taau(other, np.zeros((3, 4, 2), dtype=np.float32), (0.0, 0.0)), fresh)
 
 
+def test_the_renderers_channel_views_give_what_their_copies_give():
+    """TAAU reads colour, motion and depth in place (strided views into the renderer's one buffer): the same
+    frames as views and as contiguous copies, over a moving orbit, give identical outputs and side outputs;
+    without side outputs, the same image."""
+    from volsr_core.io import make_phantom
+    from volsr_core.render import RayCaster
+    from volsr_core.scene import Volume, get_preset
+    from volsr_core.scene.camera_paths import orbit_around
+
+    caster = RayCaster(Volume.from_record(make_phantom()), get_preset("CT-Phantom"), start_jitter="ign")
+    in_place, copied, previous = TemporalUpsampler(2), TemporalUpsampler(2), None
+    image_only = TemporalUpsampler(2, side_outputs=False)
+    for t, camera in enumerate(orbit_around(caster.visible_bounds(), 4, 3.0)):
+        frame = caster.render(camera, 24, 24, jitter=halton_jitter(t, jitter_phases(2)), previous_camera=previous,
+                              seed=t)
+        assert not frame.color.flags.c_contiguous and not frame.motion.flags.c_contiguous
+        rotation = view_rotation(camera, previous)
+        views = in_place(frame.color, frame.motion, frame.jitter, frame.motion_depth, rotation)
+        copies = copied(frame.color.copy(), frame.motion.copy(), frame.jitter, frame.motion_depth.copy(), rotation)
+        np.testing.assert_array_equal(views, copies)
+        np.testing.assert_array_equal(in_place.last_aux, copied.last_aux)
+        np.testing.assert_array_equal(image_only(frame.color, frame.motion, frame.jitter, frame.motion_depth,
+                                                 rotation), views)
+        assert image_only.last_aux is None
+        previous = camera
+
+
 def test_ct_avm_orbit_beats_single_frame_upscaling_at_2x_and_4x(ct_avm_path):
     """A 2 degree/frame orbit of CT_AVM (semi-transparent CT-AAA), 192² output, renderer motion vectors
     and motion depth: the last frames beat the unjittered LR render upscaled (what VTK shows)."""

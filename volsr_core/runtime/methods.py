@@ -150,7 +150,7 @@ class Taau(Method):
     def __init__(self, caster: RayCaster | None, size: tuple[int, int], scale: int):
         super().__init__(size)
         self.caster, self.scale = caster, int(scale)
-        self.upsampler = taau_upsampler(self.scale)
+        self.upsampler = taau_upsampler(self.scale, side_outputs=False)
         self.frame = 0
         self.previous: Camera | None = None
 

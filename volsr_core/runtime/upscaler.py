@@ -148,7 +148,7 @@ class StatefulUpscaler:
     def _filtered(self, frame: FeatureFrame) -> np.ndarray:
         """:meth:`upscale` for a network that is only its base filter, run by the engine's CPU kernel
         (:func:`~volsr_core.runtime.base_filter.filter_image`) on TAAU's (H, W, 3) estimate as it comes."""
-        colour = np.ascontiguousarray(frame.color, dtype=np.float32)
+        colour = frame.color  # a view into the renderer's buffer, read in place by TAAU
         motion = frame.motion if self._continues(frame, colour) else np.zeros_like(frame.motion)
         self.frames.appendleft((colour, motion, np.asarray(frame.jitter, dtype=np.float32)))
         base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth,

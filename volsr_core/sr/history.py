@@ -42,11 +42,12 @@ def pick_history(mode: str, previous_output: Any, taau_estimate: Any) -> Any:
     return {"none": None, "recurrent": previous_output, "taau": taau_estimate}[mode]
 
 
-def taau_upsampler(scale: int) -> TemporalUpsampler:
+def taau_upsampler(scale: int, side_outputs: bool = True) -> TemporalUpsampler:
     """The TAAU a TAAU-based network refines, its settings chosen here for training data, evaluation and
     the runtime alike (a network sees at run time the TAAU it was trained on). :class:`HistoryFeed` tells
-    it each frame's ``pixels_per_voxel`` only for a network with ``taau_fine_sampling``."""
-    return TemporalUpsampler(scale)
+    it each frame's ``pixels_per_voxel`` only for a network with ``taau_fine_sampling``, and asks for its
+    side outputs (``last_aux``) only for one with ``taau_aux``."""
+    return TemporalUpsampler(scale, side_outputs=side_outputs)
 
 
 def stand_in_history(lr: np.ndarray, scale: int) -> np.ndarray:
@@ -68,8 +69,8 @@ class HistoryFeed:
 
     def __init__(self, config: Any):
         self.mode = history_mode(config)
-        self.taau = taau_upsampler(config.scale) if self.mode == "taau" else None
         self.taau_aux = bool(getattr(config, "taau_aux", False))
+        self.taau = taau_upsampler(config.scale, self.taau_aux) if self.mode == "taau" else None
         self.fine_sampling = bool(getattr(config, "taau_fine_sampling", False))
         self.previous: np.ndarray | None = None
 

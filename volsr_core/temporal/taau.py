@@ -106,6 +106,17 @@ def _prepass(lr, motion, scale, dis_motion, box):
 
 
 @numba.njit(**_NB)
+def _moves(motion, eps):
+    """Whether any vector of ``motion`` (h, w, 2) has a component of at least ``eps``: stops at the first,
+    so a moving frame costs next to nothing, and reads a strided view without copying it."""
+    for j in range(motion.shape[0]):
+        for i in range(motion.shape[1]):
+            if abs(motion[j, i, 0]) >= eps or abs(motion[j, i, 1]) >= eps:
+                return True
+    return False
+
+
+@numba.njit(**_NB)
 def _catmull_rom_weights(t):
     """The four Catmull-Rom weights at fraction ``t`` in [0, 1) past the second tap: those of
     :func:`~volsr_core.temporal.color.fetch_catmull_rom`, in float32 as the history is."""
@@ -139,7 +150,7 @@ def _rectify(h0, h1, h2, box, ly, lx):
 
 @numba.njit(**_NB)
 def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
-         rectify, out, new_history, aux):
+         rectify, out, new_history, keep_aux, aux):
     hr_h, hr_w = out.shape[0], out.shape[1]
     lr_h, lr_w = lr.shape[0], lr.shape[1]
     v = (y + 0.5) / scale - 0.5 - jy
@@ -242,18 +253,19 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
             new_history[y, x, 2] = o2
             new_history[y, x, 3] = min(n + a, cap)
             new_history[y, x, 4] = d
-            aux[y, x, 0] = h0  # what the history said (reprojected, rectified; 0 where there was none) ...
-            aux[y, x, 1] = h1
-            aux[y, x, 2] = h2
-            aux[y, x, 3] = n / (n + a)  # ... and its share of the blend
+            if keep_aux:
+                aux[y, x, 0] = h0  # what the history said (reprojected, rectified; 0 where there was none) ...
+                aux[y, x, 1] = h1
+                aux[y, x, 2] = h2
+                aux[y, x, 3] = n / (n + a)  # ... and its share of the blend
 
 
 @numba.njit(parallel=True, cache=True)
 def _kernel(history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
-            rectify, out, new_history, aux):
+            rectify, out, new_history, keep_aux, aux):
     for y in numba.prange(out.shape[0]):
-        _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion, rectify,
-             out, new_history, aux)
+        _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
+             rectify, out, new_history, keep_aux, aux)
 
 
 def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> tuple[np.ndarray, np.ndarray]:
@@ -291,6 +303,7 @@ class TemporalUpsampler:
     with the narrower splats, disocclusion at 0.1 quasi-depth behind where the 3x3 motion spreads
     more than 0.5 HR px; from 1.75 to 2.75 output pixels per voxel the splat turns 0.75 bilinear and
     the cap falls to a quarter (512² of our 256-voxel volumes is 1.4-1.7, 1024² is 2.8-3.4).
+    ``side_outputs=False`` skips :attr:`last_aux` for a caller that wants the image alone.
     """
 
     def __init__(self, scale: int, *, sigma: float = 0.35, still_sigma_hr: float = 0.5, static_sigma_hr: float = 0.3,
@@ -298,7 +311,7 @@ class TemporalUpsampler:
                  cap_angle: float = 2.0 / 3.0, still_count: float = 16.0, disocclusion: float = 0.1,
                  dis_motion: float = 0.5, assumed_rotation: float = 2.0,
                  smooth_between: tuple[float, float] = (1.75, 2.75), smooth_tent: float = 0.75,
-                 smooth_count: float = 0.25):
+                 smooth_count: float = 0.25, side_outputs: bool = True):
         if scale < 1 or int(scale) != scale:
             raise ValueError(f"scale must be a positive integer, got {scale}")
         if sigma <= 0 or still_sigma_hr <= 0 or static_sigma_hr <= 0:
@@ -316,8 +329,9 @@ class TemporalUpsampler:
         self.assumed_rotation = float(assumed_rotation)
         self.smooth_between = (float(smooth_between[0]), float(smooth_between[1]))
         self.smooth_tent, self.smooth_count = float(smooth_tent), float(smooth_count)
+        self.side_outputs = bool(side_outputs)
         self.history: np.ndarray | None = None  # (H, W, 5): RGB, accumulated weight, depth
-        self.last_aux: np.ndarray | None = None  # (H, W, 4) of the last frame: see __call__
+        self.last_aux: np.ndarray | None = None  # (H, W, 4) of the last frame with side_outputs: see __call__
         self._spare: np.ndarray | None = None
         self._box: np.ndarray | None = None
         self._cols: dict = {}
@@ -349,11 +363,14 @@ class TemporalUpsampler:
         (:attr:`~volsr_core.render.features.FeatureFrame.pixels_per_voxel`), None when unknown (then
         no smoothing: the choice for frames that sample the volume coarsely).
 
-        :attr:`last_aux` then holds what the blend threw away, (H, W, 4): the reprojected, rectified
-        history colour (0 where there was none) and its share of the blend, n / (n + a) in [0, 1).
+        With ``side_outputs`` (the default) :attr:`last_aux` then holds what the blend threw away, (H, W, 4):
+        the reprojected, rectified history colour (0 where there was none) and its share of the blend,
+        n / (n + a) in [0, 1); without, it is None and the kernel writes none of it (a quarter less to write).
         """
-        lr = np.ascontiguousarray(lr_color, dtype=np.float32)
-        motion = np.ascontiguousarray(lr_motion, dtype=np.float32)
+        # read where they lie: the renderer's buffers are channel views of one (h, w, 15) array, and copying
+        # them out cost more than the kernels' strided reads (1024² output: about 3 ms a frame)
+        lr = np.asarray(lr_color, dtype=np.float32)
+        motion = np.asarray(lr_motion, dtype=np.float32)
         if lr.ndim != 3 or lr.shape[2] != 3 or motion.shape != lr.shape[:2] + (2,):
             raise ValueError(f"expected colour (h, w, 3) and motion (h, w, 2), got {lr_color.shape} and "
                              f"{lr_motion.shape}")
@@ -363,7 +380,7 @@ class TemporalUpsampler:
         if depth is None:
             depth_arr, disocclusion = np.ones(lr.shape[:2], dtype=np.float32), 0.0
         else:
-            depth_arr, disocclusion = np.ascontiguousarray(depth, dtype=np.float32), self.disocclusion
+            depth_arr, disocclusion = np.asarray(depth, dtype=np.float32), self.disocclusion
             if depth_arr.shape != lr.shape[:2]:
                 raise ValueError(f"depth must be (h, w), got {depth_arr.shape}")
         s = self.scale
@@ -371,7 +388,7 @@ class TemporalUpsampler:
         shape = (h * s, w * s, 5)
         has = self.history is not None and self.history.shape == shape
         history = self.history if has else np.zeros((1, 1, 5), dtype=np.float32)
-        static = not np.any(np.abs(motion) >= 1e-3)  # nothing moves at all (or no previous frame)
+        static = not _moves(motion, 1e-3)  # nothing moves at all (or no previous frame)
         if rotation is None:  # unknown: still only when nothing moves, else assume a brisk rotation
             rotation = 0.0 if static else self.assumed_rotation
         rotation = max(float(rotation), 0.0)
@@ -396,10 +413,10 @@ class TemporalUpsampler:
         new_history = self._spare if self._spare is not None and self._spare.shape == shape else \
             np.empty(shape, dtype=np.float32)
         out = np.empty(shape[:2] + (3,), dtype=np.float32)
-        aux = np.empty(shape[:2] + (4,), dtype=np.float32)
+        aux = np.empty(shape[:2] + (4,) if self.side_outputs else (1, 1, 4), dtype=np.float32)
         _kernel(history, has, lr, motion, depth_arr, self._box, cols, runs, s, jy, inv2s2, tent, cap, disocclusion,
-                not static, out, new_history, aux)
-        self.last_aux = aux
+                not static, out, new_history, self.side_outputs, aux)
+        self.last_aux = aux if self.side_outputs else None
         self._spare = self.history if has else None
         self.history = new_history
         return out
