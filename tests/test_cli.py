@@ -1,7 +1,6 @@
 """The `volsr` command end to end: info, render (PNG, .npz features, --spp, camera paths)."""
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 
@@ -104,22 +103,3 @@ def test_render_with_taa_accumulates_over_the_path(tmp_path, phantom):
     image = np.asarray(Image.open(tmp_path / "taa" / "frame_0003.png")).astype(np.float32) / 255
     assert np.abs(image - expected).max() <= 0.5 / 255 + 1e-6
     assert main(["render", "--taa", "--spp", "4", "--out", str(tmp_path / "x.png")]) == 2
-
-
-def test_the_command_lets_idle_openmp_workers_sleep_unless_told_otherwise(tmp_path):
-    """OpenMP (numba's threads) reads OMP_WAIT_POLICY when it loads: the CLI's default must be set by then,
-    and a user's own setting kept. OMP_DISPLAY_ENV makes libgomp print the policy it took."""
-    def policy(**env: str) -> str:
-        environment = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
-        environment.update(OMP_DISPLAY_ENV="TRUE", **env)
-        result = subprocess.run([sys.executable, "-m", "volsr_core.cli", "render", "--size", "16x16", "--out",
-                                 str(tmp_path / "x.png")], capture_output=True, text=True, env=environment)
-        assert result.returncode == 0, result.stderr
-        shown = [line for line in (result.stdout + result.stderr).splitlines() if "OMP_WAIT_POLICY" in line]
-        if not shown:
-            pytest.skip("OpenMP printed no settings: numba's threading layer here is not libgomp's")
-        assert len(shown) == 1, result.stdout + result.stderr
-        return shown[0].split("=")[1].strip(" '")
-
-    assert policy() == "PASSIVE"
-    assert policy(OMP_WAIT_POLICY="active") == "ACTIVE"

@@ -7,7 +7,6 @@ work starts, and a write that fails later leaves no partial file.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -526,20 +525,7 @@ def os_error_line(err: OSError) -> str:
     return reason if err.filename is None else f"{err.filename}: {reason}"
 
 
-def let_idle_openmp_workers_sleep() -> None:
-    """Make OpenMP's idle worker threads sleep (``OMP_WAIT_POLICY=PASSIVE``) unless the environment says otherwise.
-
-    numba's parallel kernels (ray caster, TAAU, the XS filter) run on OpenMP threads, which by default spin for
-    a while after each kernel: on a 2-core machine that took the cores from the onnxruntime network that runs
-    next (a U-Net call inside the pipeline 24.9-25.5 ms spinning, 20.9-22.5 ms sleeping; docs/performance.md).
-    OpenMP reads the setting when it loads, at numba's first parallel kernel, so this runs before any. A host
-    (3D Slicer, ParaView) owns its own process: there, set ``OMP_WAIT_POLICY=PASSIVE`` before starting it.
-    """
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
-
 def main(argv: Sequence[str] | None = None) -> int:
-    let_idle_openmp_workers_sleep()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
