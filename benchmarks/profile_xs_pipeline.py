@@ -1,0 +1,61 @@
+"""Where VolSR XS's time after the LR render goes inside a ``Pipeline``: median ms per frame of the whole step and
+of its kernels (TAAU's prepass and kernel, the filter).
+
+    python benchmarks/profile_xs_pipeline.py [--volume MR_Gd.nii.gz:MR-Default] [--size 1024] [--scale 2]
+                                             [--frames 24]
+
+The pipeline renders an orbit of ``--frames`` frames of 2° each; the first four are not counted (history,
+compilation). Run it under different process settings (``OMP_WAIT_POLICY=PASSIVE python ...``) and alternate
+the runs to compare them: the machine's noise moves single runs.
+"""
+from __future__ import annotations
+
+import statistics
+import time
+from typing import Callable
+
+from bench_taau import orbit_parser, orbit_scene
+
+import volsr_core.runtime.upscaler as upscaler
+import volsr_core.temporal.taau as taau
+from volsr_core.runtime.pipeline import Pipeline
+
+WARMUP = 4
+
+
+def timed(module, name: str, times: dict[str, list[float]]) -> None:
+    """Replace ``module.name`` by a wrapper that appends each call's ms to ``times[name]``."""
+    function: Callable = getattr(module, name)
+
+    def wrapper(*args, **kwargs):
+        started = time.perf_counter()
+        result = function(*args, **kwargs)
+        times.setdefault(name, []).append(1000.0 * (time.perf_counter() - started))
+        return result
+
+    setattr(module, name, wrapper)
+
+
+def main() -> None:
+    parser = orbit_parser(__doc__.split("\n\n")[0])
+    parser.set_defaults(volume="MR_Gd.nii.gz:MR-Default", frames=24)
+    parser.add_argument("--size", type=int, default=1024)
+    parser.add_argument("--scale", type=int, default=2)
+    args = parser.parse_args()
+    scene, _, cameras = orbit_scene(args)
+    times: dict[str, list[float]] = {}
+    for module, name in ((taau, "_prepass"), (taau, "_kernel"), (upscaler, "filter_image")):
+        timed(module, name, times)
+    pipeline = Pipeline(scene.volume, scene.transfer_function, scale=args.scale, variant="XS",
+                        size=(args.size, args.size), threads=2)
+    step = []
+    for camera in cameras:
+        pipeline.render(camera)
+        step.append(pipeline.last_timings["network_ms"])
+    after = statistics.median(step[WARMUP:])
+    print(f"{scene.label}, {args.size}², XS {args.scale}x: after the LR render {after:.2f} ms"
+          + "".join(f", {name} {statistics.median(ms[WARMUP:]):.2f}" for name, ms in times.items()))
+
+
+if __name__ == "__main__":
+    main()
