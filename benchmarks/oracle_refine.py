@@ -73,6 +73,14 @@ def top_pixels(rank: np.ndarray, fraction: float) -> np.ndarray:
     return np.ascontiguousarray(np.stack(np.unravel_index(flat, rank.shape), axis=1))
 
 
+def _range3x3(image: np.ndarray) -> np.ndarray:
+    """Max minus min over each pixel's 3x3 neighbourhood (edges repeated)."""
+    padded = np.pad(image, 1, mode="edge")
+    h, w = image.shape
+    windows = np.stack([padded[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)])
+    return windows.max(axis=0) - windows.min(axis=0)
+
+
 def main() -> None:
     parser = orbit_parser(__doc__.split("\n\n")[0])
     parser.set_defaults(frames=9, sizes="512")
@@ -123,14 +131,6 @@ def main() -> None:
         for name, psnr in scores.items():
             share = (ms.get(name, 0.0) + extra.get(name, 0.0)) / ms["native"]
             print(f"| {size}² | {name} | {share:.2f} | {psnr:.2f} |", flush=True)
-
-
-def _range3x3(image: np.ndarray) -> np.ndarray:
-    """Max minus min over each pixel's 3x3 neighbourhood (edges repeated)."""
-    padded = np.pad(image, 1, mode="edge")
-    h, w = image.shape
-    windows = np.stack([padded[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)])
-    return windows.max(axis=0) - windows.min(axis=0)
 
 
 if __name__ == "__main__":
