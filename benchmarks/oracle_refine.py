@@ -10,9 +10,10 @@ The shipped XS model of each scale runs a ``Pipeline`` along the benchmark's orb
 LR sample and (b) the squared error of XS's output against the 16-spp reference take the native 1-spp render's
 value. The cost of those rays is measured by casting just them (the renderer's ray program over a pixel list)
 against a full native render, interleaved, the median of ``--repeats`` (rays differ in cost, and the
-high-contrast ones cross the most material), and added to XS's median ms per frame on the orbit. Printed per fraction: the time of the LR render + those rays as a
-share of a native frame and the PSNR (dB) against the reference; beside them the native renders at 1/2, 1/3
-and 1/4 size + bilinear with their share of a native frame's time: at equal time, the higher PSNR wins.
+high-contrast ones cross the most material), and added to XS's median ms per frame on the orbit. Printed per
+fraction: XS's frame + those rays as a share of a native frame's time and the PSNR (dB) against the reference;
+beside them the native renders at 1/2, 1/3 and 1/4 size + bilinear with their share of a native frame's time:
+at equal time, the higher PSNR wins.
 """
 from __future__ import annotations
 
