@@ -27,6 +27,7 @@ from bench_taau import orbit_parser, orbit_scene
 
 from volsr_core.render import RayCaster
 from volsr_core.render.cpu import march_ray
+from volsr_core.render.layout import SLAB_CHANNELS
 from volsr_core.runtime.pipeline import Pipeline
 from volsr_core.scene.camera import Camera
 from volsr_core.sr.metrics import psnr_ssim
@@ -38,9 +39,9 @@ LUMA = np.array([0.25, 0.5, 0.25], dtype=np.float32)
 
 
 @numba.njit(parallel=True, fastmath=True)
-def _cast_pixels(pixels, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out):
+def _cast_pixels(pixels, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
     for i in numba.prange(pixels.shape[0]):
-        march_ray(pixels[i, 1], pixels[i, 0], vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out)
+        march_ray(pixels[i, 1], pixels[i, 0], vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
 
 
 def pixel_caster(caster: RayCaster, camera: Camera, size: int) -> Callable[[np.ndarray], None]:
@@ -48,10 +49,11 @@ def pixel_caster(caster: RayCaster, camera: Camera, size: int) -> Callable[[np.n
     out = np.empty_like(caster.render(camera, size).data)
     cam = caster._camera_array(camera, size, size, (0.0, 0.0))
     params, tables = caster._params(0, False), caster.tables
+    no_slabs = np.empty((1, 1, 1, SLAB_CHANNELS), np.float32)
 
     def cast(pixels: np.ndarray) -> None:
         _cast_pixels(pixels, caster.volume.array, caster._empty, tables.rgba, tables.gradient_opacity, cam,
-                     caster._w2i, caster._grad_w, params, np.eye(4), out)
+                     caster._w2i, caster._grad_w, params, np.eye(4), out, no_slabs)
     return cast
 
 

@@ -7,8 +7,9 @@ forward to the current view by its own pixels' world points, against today's TAA
 
 What ``oracle_layered_warp.py`` found for one exact frame, tried in the loop: the camera's clipping range (the
 union over the orbit) is cut into K equal depth slabs; every frame renders each slab at 1/``--scale`` size with
-the Halton jitter TAAU uses (here by K clipped renders; a ray caster would write the K partial composites in its
-one pass). Per slab the HR history holds premultiplied RGBA, its accumulated weight and each pixel's world point
+the Halton jitter TAAU uses (here by K clipped renders; the library's ray caster writes the K partial composites
+in its one pass: ``RayCaster.render(..., slabs=K)``, and ``benchmarks/bench_layered_taau.py`` measures the library's
+layered TAAU). Per slab the HR history holds premultiplied RGBA, its accumulated weight and each pixel's world point
 (the pixel's own ray at the view depth of the slab's most opaque sample). Each frame, per slab: the history is
 pushed to the new view (bilinear splats of its world points, normalised), brought into the RGBA min/max box of
 the slab's 3x3 LR neighbourhood, and blended with the slab's Gaussian splat of its LR samples (``--sigmas``, LR

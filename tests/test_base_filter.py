@@ -119,6 +119,31 @@ def test_the_upscaler_makes_the_same_frames_through_the_kernel_as_through_the_gr
         assert kernel_frame.shape == (48, 64, 3) and np.abs(kernel_frame - graph_frame).max() < 1e-5
 
 
+def test_an_xs_pipeline_in_depth_slabs_filters_the_layered_taau_estimate(tmp_path):
+    """Pipeline(slabs=K): frames rendered in K depth slabs, the layered TAAU's estimate (over the pipeline's
+    background, told the frame's pixels per voxel) through XS's filter; a U-Net model takes no slabs."""
+    from volsr_core.temporal.layered import LayeredUpsampler
+    from volsr_core.temporal.taau import view_rotation
+
+    net = random_filter(SuperResolutionNet(variant_config("XS", 2, taau_base=True)))
+    path = export_onnx(net, tmp_path / "xs.onnx")
+    volume = Volume.from_record(make_phantom(shape=(48, 48, 48), spacing=(2.0, 2.0, 2.0)))
+    pipeline = Pipeline(volume, get_preset("CT-Phantom"), path, scale=2, size=(64, 48), threads=2, slabs=3,
+                        background=(0.1, 0.2, 0.3))
+    layered, previous = LayeredUpsampler(2), None
+    for camera in orbit_around(pipeline.caster.visible_bounds(), 4, 3.0):
+        image = pipeline.render(camera)
+        lr = pipeline.last_low_resolution
+        assert lr.slabs.shape == (3, 24, 32, 6)
+        estimate = layered(lr.slabs, lr.jitter, (0.1, 0.2, 0.3), view_rotation(camera, previous), lr.pixels_per_voxel)
+        expected = np.clip(filter_image(estimate, *pipeline.engine.base_filter), 0.0, 1.0)
+        assert np.abs(image - expected).max() < 1e-6
+        previous = camera
+    s_model = export_onnx(SuperResolutionNet(variant_config("S", 2, taau_base=True)), tmp_path / "s.onnx")
+    with pytest.raises(ValueError, match="depth slabs"):
+        Pipeline(volume, get_preset("CT-Phantom"), s_model, scale=2, slabs=2)
+
+
 def test_work_buffers_kept_between_frames_change_no_result():
     rng = np.random.default_rng(5)
     weights, bias = rng.normal(0, 0.2, (2, 3, 5, 5)).astype(np.float32), rng.normal(0, 0.1, (2, 3)).astype(np.float32)

@@ -13,6 +13,7 @@ from volsr_core.scene.camera_paths import orbit_around
 from volsr_core.sr.history import HistoryFeed, pick_history, taau_upsampler
 from volsr_core.sr.network_config import variant_config
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
+from volsr_core.temporal.layered import LayeredUpsampler
 from volsr_core.temporal.supersample import render_supersampled
 from volsr_core.temporal.resample import resize_bilinear, upscale_bicubic
 from volsr_core.temporal.taau import TemporalUpsampler, view_rotation
@@ -69,6 +70,23 @@ def test_taau_method_is_halton_jittered_frames_through_the_networks_taau(caster)
         previous = camera
     method.reset()
     assert method.previous is None and method.upsampler.history is None
+
+
+def test_a_layered_taau_method_upscales_the_frames_depth_slabs(caster):
+    cameras = orbit_around(caster.volume.bounds, 3, 2.0, aspect=SIZE[0] / SIZE[1])
+    method, upsampler = Taau(caster, SIZE, 2, slabs=3), LayeredUpsampler(2)
+    assert method.label == "TAAU 2x in 3 slabs" and method.kind == "taau"
+    previous = None
+    for t, camera in enumerate(cameras):
+        frame = method(camera)
+        lr = caster.render(camera, 24, 20, jitter=halton_jitter(t, jitter_phases(2)), previous_camera=previous,
+                           slabs=3, seed=t)
+        expected = upsampler(lr.slabs, lr.jitter, caster.background, view_rotation(camera, previous),
+                             lr.pixels_per_voxel)
+        assert np.array_equal(frame.image, expected) and frame.image.shape == (40, 48, 3)
+        previous = camera
+    with pytest.raises(ValueError, match="slabs"):
+        method.upscale(frame.low_resolution.color, frame.low_resolution.motion, (0.0, 0.0))
 
 
 def test_pick_history_and_the_feed_follow_the_networks_configuration():

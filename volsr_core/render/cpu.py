@@ -10,7 +10,7 @@ march_ray = build_ray_program(numba.njit(inline="always", fastmath=True, boundsc
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out):
+def _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
     height, width = out.shape[0], out.shape[1]
     half = (height + 1) // 2
     for r in numba.prange(height):
@@ -18,11 +18,12 @@ def _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out):
         # splits the range in contiguous chunks) samples the whole image: balanced work
         y = r // 2 if r % 2 == 0 else half + r // 2
         for x in range(width):
-            march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out)
+            march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
 
 
 def render_cpu(vol: np.ndarray, empty: np.ndarray, lut: np.ndarray, glut: np.ndarray, cam: np.ndarray,
                w2i: np.ndarray, grad_w: np.ndarray, params: np.ndarray, prev_vp: np.ndarray,
-               out: np.ndarray) -> None:
-    """Fill ``out`` (H, W, OUT_CHANNELS) with every pixel's ray, on all CPU threads."""
-    _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out)
+               out: np.ndarray, slabs: np.ndarray) -> None:
+    """Fill ``out`` (H, W, OUT_CHANNELS) with every pixel's ray, on all CPU threads, and ``slabs`` (K, H, W,
+    SLAB_CHANNELS) with its depth slabs when ``params[P_SLABS]`` is K > 0."""
+    _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)

@@ -10,6 +10,7 @@ from volsr_core.atomic import atomic_write
 from volsr_core.images import to_uint8
 from volsr_core.render.layout import (
     OUT_ALPHA, OUT_CHANNELS, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA, OUT_MOTION, OUT_MOTION_DEPTH, OUT_POSITION,
+    SLAB_CHANNELS,
 )
 from volsr_core.scene.camera import Camera
 
@@ -33,7 +34,11 @@ class FeatureFrame:
     - ``motion_depth`` (H, W): quasi-depth (as ``depth``) of that point; 1 for background;
     - ``jitter``: the sub-pixel offset (pixels, +y down) every ray was shifted by;
     - ``pixels_per_voxel``: how many of this frame's pixels the volume's smallest voxel spacing spans
-      at the focal point (None when unknown): how finely the frame samples the volume's detail.
+      at the focal point (None when unknown): how finely the frame samples the volume's detail;
+    - ``slabs`` (K, H, W, SLAB_CHANNELS) or None: the frame cut into K depth slabs, nearest first
+      (``RayCaster.render(..., slabs=K)``): per slab the premultiplied RGB and alpha of its samples alone
+      (``SLAB_RGBA``) and the motion vector of its opacity-weighted mean point (``SLAB_MOTION``, 0 where the
+      slab is empty); composited front to back they give ``color`` (over the background) and ``alpha``.
     """
 
     data: np.ndarray
@@ -41,10 +46,15 @@ class FeatureFrame:
     jitter: tuple[float, float] = (0.0, 0.0)
     previous_camera: Camera | None = None
     pixels_per_voxel: float | None = None
+    slabs: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.data.ndim != 3 or self.data.shape[2] != OUT_CHANNELS:
             raise ValueError(f"feature data must be (H, W, {OUT_CHANNELS}), got {self.data.shape}")
+        if self.slabs is not None and (self.slabs.ndim != 4 or self.slabs.shape[1:] != self.data.shape[:2]
+                                       + (SLAB_CHANNELS,)):
+            raise ValueError(f"slabs must be (K, {self.height}, {self.width}, {SLAB_CHANNELS}), got "
+                             f"{self.slabs.shape}")
 
     @property
     def height(self) -> int:

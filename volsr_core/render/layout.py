@@ -19,7 +19,9 @@ CAM_JITTER_Y = 18    # +y down
 CAM_DEPTH_LO = 19    # view depth (mm) mapped to quasi-depth 0 (front of the volume's bounding sphere)
 CAM_DEPTH_SPAN = 20  # view depth span (mm) mapped to [0, 1] (the sphere's diameter)
 CAM_FOCAL_DEPTH = 21 # view depth (mm) of the focal plane: where background pixels put their point
-CAM_SIZE = 22
+CAM_SLAB_NEAR = 22   # view depth (mm) where depth slab 0 begins (the visible bounds' front, within the clipping range)
+CAM_SLAB_SPAN = 23   # view depth span (mm) cut into P_SLABS equal slabs
+CAM_SIZE = 24
 
 # params: float64[PARAM_SIZE], sampling, classification and lighting ---------------------------
 P_STEP = 0           # sample distance, mm
@@ -43,7 +45,8 @@ P_BLOCK = 16         # empty-space-skipping block edge, voxels
 P_HAS_PREV = 17      # 1.0 when prev_vp holds a previous camera
 P_DEPTH_MODE = 18    # the point motion vectors reproject: 0 max alpha, 1 opacity threshold, 2 opacity-weighted mean
 P_DEPTH_THRESHOLD = 19  # accumulated opacity mode 1 looks for (max alpha where it is never reached)
-P_SIZE = 20
+P_SLABS = 20         # depth slabs each ray also composites apart (0: none; the slabs array is then unused)
+P_SIZE = 21
 
 # out: float32[H, W, OUT_CHANNELS], one pass's feature buffers -----------------------------------
 OUT_COLOR = 0        # 3: RGB composited over the background
@@ -54,3 +57,8 @@ OUT_POSITION = 9     # 3: world position (mm) of that sample (focal-plane point 
 OUT_MOTION = 12      # 2: motion vector (pixels) to the previous frame
 OUT_MOTION_DEPTH = 14  # 1: quasi-depth of the point the motion vector reprojects (P_DEPTH_MODE; 1 = background)
 OUT_CHANNELS = 15
+
+# slabs: float32[K, H, W, SLAB_CHANNELS], the same pass cut into K depth slabs (P_SLABS > 0) -----------
+SLAB_RGBA = 0        # 4: premultiplied RGB and alpha of the slab's samples alone, composited front to back
+SLAB_MOTION = 4      # 2: motion vector (pixels) of the slab's opacity-weighted mean point; 0 where the slab is empty
+SLAB_CHANNELS = 6

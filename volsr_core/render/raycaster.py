@@ -41,6 +41,11 @@ class RayCaster:
     opacity-weighted mean of the composited samples' distances. That point's quasi-depth is the
     ``motion_depth`` buffer.
 
+    ``render(..., slabs=K)`` also cuts each ray into K depth slabs (equal spans of view depth over what
+    the transfer function shows, :meth:`visible_bounds`, within the clipping range) and composites each
+    apart in the same pass: :attr:`FeatureFrame.slabs`, which composited front to back give the frame's
+    colour and alpha. An opaque slab ends there, not the ray: the slabs behind keep what it hides.
+
     ``device="cuda"`` runs the same ray program through numba-cuda (or its simulator).
     """
 
@@ -99,6 +104,8 @@ class RayCaster:
             self._empty = empty_blocks(self._block_lo, self._block_hi, self.tables)
         else:
             self._empty = np.zeros(self._block_lo.shape, dtype=np.uint8)
+        b = np.asarray(self.visible_bounds(), dtype=np.float64).reshape(3, 2)
+        self._visible_corners = np.array([[x, y, z] for x in b[0] for y in b[1] for z in b[2]])
 
     def visible_bounds(self) -> tuple[float, float, float, float, float, float]:
         """Axis-aligned world bounds (mm, LPS; as :attr:`Volume.bounds`) of what the transfer function
@@ -115,7 +122,7 @@ class RayCaster:
         a, b = world.min(axis=0), world.max(axis=0)
         return (a[0], b[0], a[1], b[1], a[2], b[2])
 
-    def _params(self, seed: int, has_prev: bool) -> np.ndarray:
+    def _params(self, seed: int, has_prev: bool, slabs: int = 0) -> np.ndarray:
         tf, t = self._tf, self.tables
         p = np.zeros(L.P_SIZE)
         p[L.P_STEP] = self.sample_distance
@@ -133,6 +140,7 @@ class RayCaster:
         p[L.P_HAS_PREV] = float(has_prev)
         p[L.P_DEPTH_MODE] = float(MOTION_DEPTHS.index(self.motion_depth))
         p[L.P_DEPTH_THRESHOLD] = self.depth_threshold
+        p[L.P_SLABS] = float(slabs)
         return p
 
     def _camera_array(self, camera: Camera, width: int, height: int, jitter: tuple[float, float]) -> np.ndarray:
@@ -151,35 +159,45 @@ class RayCaster:
         c[L.CAM_DEPTH_LO] = center_depth - self._sphere_radius
         c[L.CAM_DEPTH_SPAN] = 2.0 * self._sphere_radius
         c[L.CAM_FOCAL_DEPTH] = float((camera.focal_point - camera.position) @ forward)
+        depths = (self._visible_corners - camera.position) @ forward
+        near = max(float(depths.min()), camera.clipping_range[0])
+        far = max(min(float(depths.max()), camera.clipping_range[1]), near + 1e-6)
+        c[L.CAM_SLAB_NEAR], c[L.CAM_SLAB_SPAN] = near, far - near
         return c
 
     def render(self, camera: Camera, width: int, height: int | None = None, *,
                jitter: Sequence[float] = (0.0, 0.0), previous_camera: Camera | None = None,
-               seed: int = 0, out: np.ndarray | None = None) -> FeatureFrame:
+               seed: int = 0, out: np.ndarray | None = None, slabs: int = 0) -> FeatureFrame:
         """Render ``width`` x ``height`` pixels (height defaults to width) seen by ``camera``.
 
         ``jitter`` shifts every ray by (jx, jy) pixels (+y down), e.g. a Halton offset in
         [-0.5, 0.5); ``previous_camera`` enables motion vectors; ``seed`` drives the per-ray
-        start jitter when it is on; ``out`` may pass a float32 (H, W, OUT_CHANNELS) array to reuse.
+        start jitter when it is on; ``out`` may pass a float32 (H, W, OUT_CHANNELS) array to reuse; ``slabs``
+        K > 0 also composites K depth slabs apart (:attr:`FeatureFrame.slabs`).
         """
         height = width if height is None else height
         if width < 1 or height < 1:
             raise ValueError(f"image size must be positive, got {width}x{height}")
+        if slabs < 0 or int(slabs) != slabs:
+            raise ValueError(f"slabs must be a whole number >= 0, got {slabs}")
         jitter = (float(jitter[0]), float(jitter[1]))
         if out is None or out.shape != (height, width, L.OUT_CHANNELS) or out.dtype != np.float32:
             out = np.empty((height, width, L.OUT_CHANNELS), dtype=np.float32)
         cam = self._camera_array(camera, width, height, jitter)
         prev_vp = np.eye(4) if previous_camera is None else previous_camera.view_projection(width / height)
-        params = self._params(seed, previous_camera is not None)
+        params = self._params(seed, previous_camera is not None, int(slabs))
+        slab_out = np.empty((int(slabs), height, width, L.SLAB_CHANNELS) if slabs else (1, 1, 1, L.SLAB_CHANNELS),
+                            dtype=np.float32)
         t = self.tables
         if self.device == "cuda":
             from volsr_core.render.cuda import render_cuda
             self._cuda_volume.set_empty(self._empty)
             render_cuda(self._cuda_volume, t.rgba, t.gradient_opacity, cam, self._w2i, self._grad_w, params,
-                        np.ascontiguousarray(prev_vp), out)
+                        np.ascontiguousarray(prev_vp), out, slab_out)
         else:
             from volsr_core.render.cpu import render_cpu
             render_cpu(self.volume.array, self._empty, t.rgba, t.gradient_opacity, cam, self._w2i, self._grad_w,
-                       params, np.ascontiguousarray(prev_vp), out)
+                       params, np.ascontiguousarray(prev_vp), out, slab_out)
         voxel = float(min(self.volume.spacing))
-        return FeatureFrame(out, camera, jitter, previous_camera, voxel / camera.pixel_size_at_focus(height))
+        return FeatureFrame(out, camera, jitter, previous_camera, voxel / camera.pixel_size_at_focus(height),
+                            slab_out if slabs else None)

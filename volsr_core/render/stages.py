@@ -30,7 +30,10 @@ and for a visible sample (alpha > 0):
 - ``composite``: front to back;
 - ``track_motion_point``: where the accumulated opacity crosses the depth threshold, and the
   opacity-weighted sum of the samples' depths;
-- ``terminated``: early ray termination;
+- ``slab_index`` and ``store_slab`` (when the frame asks for depth slabs, ``P_SLABS`` > 0): the same
+  samples composited apart per depth slab, each slab's partial composite and motion vector stored
+  as the ray leaves it; an opaque slab skips to the next (``next_slab_sample``) instead of ending the ray;
+- ``terminated``: early ray termination (with slabs, per slab);
 
 and last ``motion_point`` (the point motion vectors reproject: max alpha, opacity threshold or
 opacity-weighted mean) and ``finish``: background, features at the sample of maximum alpha,
@@ -53,17 +56,18 @@ import math
 from typing import Callable
 
 from volsr_core.render.layout import (
-    CAM_DEPTH_LO, CAM_DEPTH_SPAN, CAM_FAR, CAM_FOCAL_DEPTH, CAM_FWD, CAM_HALF_H, CAM_HALF_W, CAM_JITTER_X,
-    CAM_JITTER_Y, CAM_NEAR, CAM_PARALLEL, CAM_POS, CAM_RIGHT, CAM_UP, OUT_ALPHA, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA,
-    OUT_MOTION, OUT_MOTION_DEPTH, OUT_POSITION, P_AMBIENT, P_BG_B, P_BG_G, P_BG_R, P_BLOCK, P_DEPTH_MODE,
+    CAM_DEPTH_LO, CAM_DEPTH_SPAN, CAM_FAR, CAM_FOCAL_DEPTH, CAM_FWD, CAM_HALF_H, CAM_HALF_W, CAM_JITTER_X, CAM_JITTER_Y,
+    CAM_NEAR, CAM_PARALLEL, CAM_POS, CAM_RIGHT, CAM_SLAB_NEAR, CAM_SLAB_SPAN, CAM_UP, OUT_ALPHA, OUT_COLOR, OUT_DEPTH,
+    OUT_MAX_RGBA, OUT_MOTION, OUT_MOTION_DEPTH, OUT_POSITION, P_AMBIENT, P_BG_B, P_BG_G, P_BG_R, P_BLOCK, P_DEPTH_MODE,
     P_DEPTH_THRESHOLD, P_DIFFUSE, P_ERT, P_GLUT_INV_DX, P_GRAD_OPACITY, P_HAS_PREV, P_LUT_INV_DX, P_LUT_X0, P_SEED,
-    P_SHADE, P_SPEC_POWER, P_SPECULAR, P_START_JITTER, P_STEP,
+    P_SHADE, P_SLABS, P_SPEC_POWER, P_SPECULAR, P_START_JITTER, P_STEP, SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA,
 )
 
 
 def build_ray_program(jit: Callable) -> Callable:
     """Compile the stages with ``jit`` and return ``march_ray(x, y, vol, empty, lut, glut, cam, w2i,
-    grad_w, params, prev_vp, out)``, which renders pixel (x, y) into ``out[y, x, :]``."""
+    grad_w, params, prev_vp, out, slabs)``, which renders pixel (x, y) into ``out[y, x, :]`` and, when
+    ``params[P_SLABS]`` > 0, its depth slabs into ``slabs[:, y, x, :]``."""
 
     # ray setup ----------------------------------------------------------------------------------
     @jit
@@ -324,6 +328,50 @@ def build_ray_program(jit: Callable) -> Callable:
         return t_max
 
     @jit
+    def slab_mapping(dx, dy, dz, cam, n_slabs):
+        """Stage: (rate, offset) with which ``t * rate - offset`` is the slab coordinate of ray parameter t: the
+        view depth's position in [CAM_SLAB_NEAR, CAM_SLAB_NEAR + CAM_SLAB_SPAN], in units of one of n_slabs."""
+        per_slab = cam[CAM_SLAB_SPAN] / max(n_slabs, 1)
+        offset = cam[CAM_SLAB_NEAR]
+        rate = 1.0
+        if cam[CAM_PARALLEL] < 0.5:  # the ray starts at the eye: view depth = t cos(angle to the view direction)
+            rate = dx * cam[CAM_FWD] + dy * cam[CAM_FWD + 1] + dz * cam[CAM_FWD + 2]
+        return rate / per_slab, offset / per_slab
+
+    @jit
+    def slab_index(t, rate, offset, n_slabs):
+        """Stage: the depth slab (0 nearest, n_slabs - 1 farthest; samples beyond either end join it) of the
+        sample at ray parameter t."""
+        return min(max(int(math.floor(t * rate - offset)), 0), n_slabs - 1)
+
+    @jit
+    def store_slab(x, y, slab, sr, sg, sb, sa, sum_w, sum_wt, ox, oy, oz, dx, dy, dz, width, height, cam, params,
+                   prev_vp, slabs):
+        """Stage: write a slab's partial composite (premultiplied RGBA of its samples alone) and the motion
+        vector of its opacity-weighted mean point into ``slabs[slab, y, x]``."""
+        t = sum_wt / sum_w if sum_w > 0.0 else 0.0
+        mx, my = reproject(ox + t * dx, oy + t * dy, oz + t * dz, x, y, width, height, cam, params, prev_vp)
+        slabs[slab, y, x, SLAB_RGBA] = sr
+        slabs[slab, y, x, SLAB_RGBA + 1] = sg
+        slabs[slab, y, x, SLAB_RGBA + 2] = sb
+        slabs[slab, y, x, SLAB_RGBA + 3] = sa
+        slabs[slab, y, x, SLAB_MOTION] = mx
+        slabs[slab, y, x, SLAB_MOTION + 1] = my
+
+    @jit
+    def next_slab_sample(k, slab, rate, offset, t0, step):
+        """Stage: the index of the first sample past sample k that lies in a slab behind ``slab``."""
+        t_next = (slab + 1 + offset) / rate
+        return max(int(math.ceil((t_next - t0) / step - 1e-9)), k + 1)
+
+    @jit
+    def clear_slabs(x, y, n_slabs, slabs):
+        """Stage: empty every slab of pixel (x, y) before the ray fills those it crosses."""
+        for k in range(n_slabs):
+            for c in range(SLAB_CHANNELS):
+                slabs[k, y, x, c] = 0.0
+
+    @jit
     def terminated(ca, params):
         """Stage: early ray termination, once the accumulated alpha reaches the threshold."""
         return ca >= params[P_ERT]
@@ -335,6 +383,23 @@ def build_ray_program(jit: Callable) -> Callable:
         z = ((wx - cam[CAM_POS]) * cam[CAM_FWD] + (wy - cam[CAM_POS + 1]) * cam[CAM_FWD + 1]
              + (wz - cam[CAM_POS + 2]) * cam[CAM_FWD + 2])
         return min(max((z - cam[CAM_DEPTH_LO]) / cam[CAM_DEPTH_SPAN], 0.0), 1.0)
+
+    @jit
+    def reproject(rx, ry, rz, x, y, width, height, cam, params, prev_vp):
+        """Stage: (mx, my), pixels from pixel (x, y) (plus the jitter) to where world point r lay in the previous
+        frame (``prev_vp``); (0, 0) without a previous camera."""
+        mx = 0.0
+        my = 0.0
+        if params[P_HAS_PREV] > 0.5:
+            cx = prev_vp[0, 0] * rx + prev_vp[0, 1] * ry + prev_vp[0, 2] * rz + prev_vp[0, 3]
+            cy = prev_vp[1, 0] * rx + prev_vp[1, 1] * ry + prev_vp[1, 2] * rz + prev_vp[1, 3]
+            cw = prev_vp[3, 0] * rx + prev_vp[3, 1] * ry + prev_vp[3, 2] * rz + prev_vp[3, 3]
+            if cw > 1e-12:
+                prev_px = (cx / cw + 1.0) * 0.5 * width
+                prev_py = (1.0 - cy / cw) * 0.5 * height
+                mx = prev_px - (x + 0.5 + cam[CAM_JITTER_X])
+                my = prev_py - (y + 0.5 + cam[CAM_JITTER_Y])
+        return mx, my
 
     @jit
     def finish(x, y, width, height, out, cr, cg, cb, ca, mr, mg, mb, ma, wx, wy, wz, rx, ry, rz, cam, params,
@@ -359,26 +424,22 @@ def build_ray_program(jit: Callable) -> Callable:
             motion_depth = quasi_depth(rx, ry, rz, cam)
         out[y, x, OUT_DEPTH] = depth
         out[y, x, OUT_MOTION_DEPTH] = motion_depth
-        mx = 0.0
-        my = 0.0
-        if params[P_HAS_PREV] > 0.5:
-            cx = prev_vp[0, 0] * rx + prev_vp[0, 1] * ry + prev_vp[0, 2] * rz + prev_vp[0, 3]
-            cy = prev_vp[1, 0] * rx + prev_vp[1, 1] * ry + prev_vp[1, 2] * rz + prev_vp[1, 3]
-            cw = prev_vp[3, 0] * rx + prev_vp[3, 1] * ry + prev_vp[3, 2] * rz + prev_vp[3, 3]
-            if cw > 1e-12:
-                prev_px = (cx / cw + 1.0) * 0.5 * width
-                prev_py = (1.0 - cy / cw) * 0.5 * height
-                mx = prev_px - (x + 0.5 + cam[CAM_JITTER_X])
-                my = prev_py - (y + 0.5 + cam[CAM_JITTER_Y])
+        mx, my = reproject(rx, ry, rz, x, y, width, height, cam, params, prev_vp)
         out[y, x, OUT_MOTION] = mx
         out[y, x, OUT_MOTION + 1] = my
 
     @jit
-    def march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out):
+    def march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
         """Render pixel (x, y): the stages in order."""
         height = out.shape[0]
         width = out.shape[1]
+        n_slabs = int(params[P_SLABS])
         ox, oy, oz, dx, dy, dz = camera_ray(x, y, width, height, cam)
+        slab_rate, slab_offset = slab_mapping(dx, dy, dz, cam, n_slabs)
+        if n_slabs > 0:
+            clear_slabs(x, y, n_slabs, slabs)
+        slab = -1  # the slab being composited, its premultiplied RGBA and its weighted depth sums
+        sr, sg, sb, sa, s_w, s_wt = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         oi, oj, ok, di, dj, dk = index_ray(ox, oy, oz, dx, dy, dz, w2i)
         t_near, t_far, t_focal = plane_crossings(dx, dy, dz, cam)
         t0, n_steps = ray_interval(x, y, oi, oj, ok, di, dj, dk, t_near, t_far, vol, params)
@@ -406,9 +467,27 @@ def build_ray_program(jit: Callable) -> Callable:
                 ca_before = ca
                 cr, cg, cb, ca = composite(r, g, b, a, cr, cg, cb, ca)
                 t_cross, sum_w, sum_wt = track_motion_point(t, ca_before, ca, t_cross, sum_w, sum_wt, threshold)
-                if terminated(ca, params):
+                if n_slabs > 0:
+                    k_slab = slab_index(t, slab_rate, slab_offset, n_slabs)
+                    if k_slab != slab:
+                        if slab >= 0:
+                            store_slab(x, y, slab, sr, sg, sb, sa, s_w, s_wt, ox, oy, oz, dx, dy, dz, width, height,
+                                       cam, params, prev_vp, slabs)
+                        slab, sr, sg, sb, sa, s_w, s_wt = k_slab, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+                    sa_before = sa
+                    sr, sg, sb, sa = composite(r, g, b, a, sr, sg, sb, sa)
+                    s_w, s_wt = s_w + (sa - sa_before), s_wt + (sa - sa_before) * t
+                    if terminated(sa, params):  # this slab is opaque: on to the next, whose layers it hides
+                        if slab == n_slabs - 1:
+                            break
+                        k = next_slab_sample(k, slab, slab_rate, slab_offset, t0, step)
+                        continue
+                elif terminated(ca, params):
                     break
             k += 1
+        if slab >= 0:
+            store_slab(x, y, slab, sr, sg, sb, sa, s_w, s_wt, ox, oy, oz, dx, dy, dz, width, height, cam, params,
+                       prev_vp, slabs)
         t_motion = motion_point(t_max, t_cross, sum_w, sum_wt, params)
         finish(x, y, width, height, out, cr, cg, cb, ca, mr, mg, mb, ma,
                ox + t_max * dx, oy + t_max * dy, oz + t_max * dz,

@@ -10,7 +10,8 @@ ms spent ray casting and upscaling.
   bilinear interpolation (what VTK's ImageSampleDistance and 3D Slicer show while interacting) or
   bicubic (the super-resolution papers' baseline);
 - :class:`Taau`: size / ``scale`` with Halton jitter and motion vectors, accumulated by the TAAU a
-  TAAU-based network refines (:func:`~volsr_core.sr.history.taau_upsampler`);
+  TAAU-based network refines (:func:`~volsr_core.sr.history.taau_upsampler`), or with ``slabs`` K by
+  the layered TAAU (:class:`~volsr_core.temporal.layered.LayeredUpsampler`) on K depth slabs;
 - :class:`VolSR`: a :class:`~volsr_core.runtime.pipeline.Pipeline` (LR render + network).
 
 ``volsr bench`` runs them side by side, ``volsr upscale --side-by-side`` draws them as panels, and
@@ -30,8 +31,9 @@ from volsr_core.render.raycaster import RayCaster
 from volsr_core.scene.camera import Camera
 from volsr_core.sr.history import taau_upsampler
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
-from volsr_core.temporal.supersample import render_supersampled
+from volsr_core.temporal.layered import LayeredUpsampler
 from volsr_core.temporal.resample import resize_bicubic, resize_bilinear
+from volsr_core.temporal.supersample import render_supersampled
 from volsr_core.temporal.taau import view_rotation
 
 INTERPOLATIONS = ("bilinear", "bicubic")
@@ -143,20 +145,21 @@ class ReducedSize(Method):
 
 class Taau(Method):
     """size / ``scale``, Halton-jittered (``halton_jitter(frame, jitter_phases(scale))``), with motion
-    vectors to the previous camera, accumulated by :func:`~volsr_core.sr.history.taau_upsampler`."""
+    vectors to the previous camera, accumulated by :func:`~volsr_core.sr.history.taau_upsampler`; with
+    ``slabs`` K > 0 rendered in K depth slabs and accumulated by the layered TAAU (one history per slab)."""
 
     kind = "taau"
 
-    def __init__(self, caster: RayCaster | None, size: tuple[int, int], scale: int):
+    def __init__(self, caster: RayCaster | None, size: tuple[int, int], scale: int, slabs: int = 0):
         super().__init__(size)
-        self.caster, self.scale = caster, int(scale)
-        self.upsampler = taau_upsampler(self.scale, side_outputs=False)
+        self.caster, self.scale, self.slabs = caster, int(scale), int(slabs)
+        self.upsampler = LayeredUpsampler(self.scale) if self.slabs else taau_upsampler(self.scale, side_outputs=False)
         self.frame = 0
         self.previous: Camera | None = None
 
     @property
     def label(self) -> str:
-        return f"TAAU {self.scale}x"
+        return f"TAAU {self.scale}x in {self.slabs} slabs" if self.slabs else f"TAAU {self.scale}x"
 
     @property
     def low_resolution_size(self) -> tuple[int, int]:
@@ -171,7 +174,9 @@ class Taau(Method):
                 pixels_per_voxel: float | None = None) -> np.ndarray:
         """The accumulation stage alone: one jittered LR frame (colour, motion, jitter, the reprojected
         point's depth, the view's rotation in degrees since the last frame, the frame's pixels per
-        voxel) in, (H, W, 3) out."""
+        voxel) in, (H, W, 3) out. Not for a layered TAAU, which takes the frame's depth slabs."""
+        if self.slabs:
+            raise ValueError("a layered TAAU upscales depth slabs, not a colour image: call it on a camera")
         return self.upsampler(colour, motion, jitter, depth, rotation, pixels_per_voxel)
 
     def __call__(self, camera: Camera) -> MethodFrame:
@@ -179,10 +184,13 @@ class Taau(Method):
         jitter = halton_jitter(self.frame, jitter_phases(self.scale))
         started = time.perf_counter()
         lr = self.caster.render(camera, width // self.scale, height // self.scale, jitter=jitter,
-                                previous_camera=self.previous, seed=self.frame)
+                                previous_camera=self.previous, seed=self.frame, slabs=self.slabs)
         rendered = time.perf_counter()
-        image = self.upscale(lr.color, lr.motion, lr.jitter, lr.motion_depth, view_rotation(camera, self.previous),
-                             lr.pixels_per_voxel)
+        rotation = view_rotation(camera, self.previous)
+        if self.slabs:
+            image = self.upsampler(lr.slabs, lr.jitter, self.caster.background, rotation, lr.pixels_per_voxel)
+        else:
+            image = self.upscale(lr.color, lr.motion, lr.jitter, lr.motion_depth, rotation, lr.pixels_per_voxel)
         self.frame += 1
         self.previous = camera
         return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered), lr)

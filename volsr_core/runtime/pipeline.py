@@ -37,7 +37,9 @@ class Pipeline:
     - ``device``: "cpu" or "cuda", for the ray caster and the network;
     - ``backend``: "auto" (by file type), "onnxruntime" or "torch";
     - ``max_turn`` (degrees), ``max_zoom``: a camera that turned or zoomed further than this since
-      the last frame is a cut (:func:`~volsr_core.runtime.upscaler.camera_jump`).
+      the last frame is a cut (:func:`~volsr_core.runtime.upscaler.camera_jump`);
+    - ``slabs``: K > 0 renders each frame in K depth slabs and accumulates them with the layered TAAU, one
+      history per slab (docs/temporal.md, "Layered history"); only for a base-filter model on TAAU (XS).
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
     rendering and upscaling that frame. :meth:`update` follows a changed volume, transfer function,
@@ -51,7 +53,7 @@ class Pipeline:
                  device: str = "cpu",
                  backend: str = "auto", fp16: bool = False, threads: int | None = None,
                  sample_distance: float | None = None, background: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 max_turn: float = 30.0, max_zoom: float = 2.0):
+                 max_turn: float = 30.0, max_zoom: float = 2.0, slabs: int = 0):
         if model is None:
             from volsr_core.runtime.models import DEFAULT_SCALE, default_variant, model_file
 
@@ -66,7 +68,8 @@ class Pipeline:
         self._caster_options = {"sample_distance": sample_distance, "device": device, "start_jitter": "ign"}
         self.caster = RayCaster(volume, transfer_function, background=tuple(float(c) for c in background),
                                 **self._caster_options)
-        self.upscaler = StatefulUpscaler(self.engine, max_turn=max_turn, max_zoom=max_zoom)
+        self.upscaler = StatefulUpscaler(self.engine, max_turn=max_turn, max_zoom=max_zoom, slabs=slabs)
+        self.slabs = self.upscaler.slabs
         self.size = (int(size[0]), int(size[1]))
         self._tf_key = _tf_key(transfer_function)
         self.frame = 0
@@ -126,9 +129,10 @@ class Pipeline:
         w, h = self.low_resolution_size
         jitter = halton_jitter(self.frame, jitter_phases(self.scale))
         started = time.perf_counter()
-        lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame)
+        lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame,
+                                slabs=self.slabs)
         rendered = time.perf_counter()
-        image = self.upscaler.upscale(lr)[: self.size[1], : self.size[0]]
+        image = self.upscaler.upscale(lr, self.caster.background)[: self.size[1], : self.size[0]]
         done = time.perf_counter()
         self.last_timings = {"render_ms": 1000 * (rendered - started), "network_ms": 1000 * (done - rendered),
                              "total_ms": 1000 * (done - started)}

@@ -148,11 +148,10 @@ def _rectify(h0, h1, h2, box, ly, lx):
     return to_rgb(c0, c1, c2)
 
 
-@numba.njit(**_NB)
-def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
-         rectify, out, new_history, keep_aux, aux):
-    hr_h, hr_w = out.shape[0], out.shape[1]
-    lr_h, lr_w = lr.shape[0], lr.shape[1]
+@numba.njit(inline="always", **_NB)
+def _row_window(y, scale, jy, lr_h, inv2s2):
+    """HR row y's LR rows: (ly, y0, y1, dy0, wy0, wy1): the nearest LR row, the 2x2 window's two rows, the
+    distance to the first and the two rows' Gaussian weights (step 1)."""
     v = (y + 0.5) / scale - 0.5 - jy
     ly = min(max(int(math.floor(v + 0.5)), 0), lr_h - 1)
     fy = math.floor(v)
@@ -160,8 +159,32 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
     y1 = min(max(int(fy) + 1, 0), lr_h - 1)
     dy0 = v - fy
     dy1 = dy0 - 1.0
-    wy0 = math.exp(-dy0 * dy0 * inv2s2)
-    wy1 = math.exp(-dy1 * dy1 * inv2s2)
+    return ly, y0, y1, dy0, math.exp(-dy0 * dy0 * inv2s2), math.exp(-dy1 * dy1 * inv2s2)
+
+
+@numba.njit(inline="always", **_NB)
+def _splat_weights(wy0, wy1, wx0, wx1, dy0, fx, tent):
+    """The 2x2 splat's weights (w00, w01, w10, w11), its confidence ``a`` and the factor ``inv`` that normalises
+    the weighted sum (step 1): Gaussian, blended with the bilinear weights at (fx, dy0) by ``tent``."""
+    w00, w01, w10, w11 = wy0 * wx0, wy0 * wx1, wy1 * wx0, wy1 * wx1
+    a = w00 + w01 + w10 + w11
+    inv = 1.0 / a
+    if tent > 0.0:
+        keep = (1.0 - tent) * inv
+        w00 = keep * w00 + tent * (1.0 - dy0) * (1.0 - fx)
+        w01 = keep * w01 + tent * (1.0 - dy0) * fx
+        w10 = keep * w10 + tent * dy0 * (1.0 - fx)
+        w11 = keep * w11 + tent * dy0 * fx
+        inv = 1.0
+    return w00, w01, w10, w11, a, inv
+
+
+@numba.njit(**_NB)
+def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
+         rectify, out, new_history, keep_aux, aux):
+    hr_h, hr_w = out.shape[0], out.shape[1]
+    lr_h, lr_w = lr.shape[0], lr.shape[1]
+    ly, y0, y1, dy0, wy0, wy1 = _row_window(y, scale, jy, lr_h, inv2s2)
     # The HR pixels whose nearest LR sample is lx (a run: columns runs[lx] .. runs[lx + 1] - 1) share its
     # motion, depth and box, so the history's rows, their Catmull-Rom weights and the disocclusion gate are
     # found once per run; along the run the history is fetched at consecutive columns, so the vertical
@@ -183,20 +206,8 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         for x in range(runs[lx], runs[lx + 1]):
             x0 = int(cols[x, 1])
             x1 = int(cols[x, 2])
-            wx0 = cols[x, 3]
-            wx1 = cols[x, 4]
             # 1. the current estimate: 2x2 Gaussian splat, blended with bilinear weights by ``tent``
-            w00, w01, w10, w11 = wy0 * wx0, wy0 * wx1, wy1 * wx0, wy1 * wx1
-            a = w00 + w01 + w10 + w11
-            inv = 1.0 / a
-            if tent > 0.0:
-                fx = cols[x, 5]
-                keep = (1.0 - tent) * inv
-                w00 = keep * w00 + tent * (1.0 - dy0) * (1.0 - fx)
-                w01 = keep * w01 + tent * (1.0 - dy0) * fx
-                w10 = keep * w10 + tent * dy0 * (1.0 - fx)
-                w11 = keep * w11 + tent * dy0 * fx
-                inv = 1.0
+            w00, w01, w10, w11, a, inv = _splat_weights(wy0, wy1, cols[x, 3], cols[x, 4], dy0, cols[x, 5], tent)
             e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
             e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
             e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
@@ -348,6 +359,34 @@ class TemporalUpsampler:
         lo, hi = self.smooth_between
         return min(max((pixels_per_voxel * self.scale - lo) / (hi - lo), 0.0), 1.0)
 
+    def _frame_settings(self, moves: bool, has_history: bool, rotation: float | None,
+                        pixels_per_voxel: float | None) -> tuple[bool, float, float, float]:
+        """This frame's (static, sigma in LR px, history cap, tent share), from whether any motion vector moves,
+        whether there is a history, the view's rotation (degrees, None: unknown) and the pixels per voxel."""
+        static = not moves  # nothing moves at all (or no previous frame)
+        if rotation is None:  # unknown: still only when nothing moves, else assume a brisk rotation
+            rotation = 0.0 if static else self.assumed_rotation
+        rotation = max(float(rotation), 0.0)
+        still = rotation < 1e-6  # no view rotation: a still camera, a pan, a zoom
+        static = static and still and has_history
+        sigma = (self.static_sigma_hr if static else self.still_sigma_hr) / self.scale if still else self.sigma
+        cap = self.still_count if still else self.max_count / (1.0 + rotation / self.cap_angle)
+        smooth = 0.0 if still else self.smoothing(pixels_per_voxel)
+        cap *= 1.0 - (1.0 - self.smooth_count) * smooth
+        return static, sigma, cap, self.smooth_tent * smooth
+
+    def _columns(self, lr_w: int, jx: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`_columns` of this LR width, horizontal jitter and sigma, kept between frames (the Halton
+        jitter repeats)."""
+        key = (lr_w, jx, sigma)
+        columns = self._cols.get(key)
+        if columns is None:
+            if len(self._cols) > 512:
+                self._cols.clear()
+            columns = self._cols[key] = _columns(lr_w * self.scale, lr_w, self.scale, jx,
+                                                 1.0 / (2.0 * sigma * sigma))
+        return columns
+
     def __call__(self, lr_color: np.ndarray, lr_motion: np.ndarray, jitter: tuple[float, float],
                  depth: np.ndarray | None = None, rotation: float | None = None,
                  pixels_per_voxel: float | None = None) -> np.ndarray:
@@ -388,25 +427,9 @@ class TemporalUpsampler:
         shape = (h * s, w * s, 5)
         has = self.history is not None and self.history.shape == shape
         history = self.history if has else np.zeros((1, 1, 5), dtype=np.float32)
-        static = not _moves(motion, 1e-3)  # nothing moves at all (or no previous frame)
-        if rotation is None:  # unknown: still only when nothing moves, else assume a brisk rotation
-            rotation = 0.0 if static else self.assumed_rotation
-        rotation = max(float(rotation), 0.0)
-        still = rotation < 1e-6  # no view rotation: a still camera, a pan, a zoom
-        static = static and still and has
-        sigma = (self.static_sigma_hr if static else self.still_sigma_hr) / s if still else self.sigma
-        cap = self.still_count if still else self.max_count / (1.0 + rotation / self.cap_angle)
-        smooth = 0.0 if still else self.smoothing(pixels_per_voxel)
-        tent = self.smooth_tent * smooth
-        cap *= 1.0 - (1.0 - self.smooth_count) * smooth
+        static, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
         inv2s2 = 1.0 / (2.0 * sigma * sigma)
-        key = (w, jx, sigma)
-        columns = self._cols.get(key)
-        if columns is None:
-            if len(self._cols) > 512:
-                self._cols.clear()
-            columns = self._cols[key] = _columns(w * s, w, s, jx, inv2s2)
-        cols, runs = columns
+        cols, runs = self._columns(w, jx, sigma)
         if self._box is None or self._box.shape[:2] != (h, w):
             self._box = np.empty((h, w, 8), dtype=np.float32)
         _prepass(lr, motion, s, self.dis_motion, self._box)

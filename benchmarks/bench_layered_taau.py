@@ -1,0 +1,74 @@
+"""TAAU with its history in depth slabs (``Taau(..., slabs=K)``), and VolSR XS on it (``Pipeline(..., slabs=K)``),
+against today's TAAU, VolSR XS and the native + bilinear curve, side by side on one orbit, as ``volsr bench`` measures
+them.
+
+    python benchmarks/bench_layered_taau.py [--volume CT_AVM.nii.gz:CT-AAA:0,446] [--sizes 512] [--scales 2,4]
+                                            [--slabs 2,4] [--degrees 2] [--frames 12]
+
+Every method renders every frame of the orbit (interleaved frame by frame, the ray caster's start jitter on, as
+``volsr bench`` renders); PSNR against the 16-spp reference is the mean over the frames after the first four,
+times are medians over the same frames. The curve runs through native 1 spp and the 1/2, 1/3, 1/4, 1/6 and 1/8
+size + bilinear points (:func:`~volsr_core.apps.bench.report.curve_psnr_at`, the bench's target 2); each TAAU
+and VolSR row gives its distance to it at its own time. VolSR rows run the shipped XS model of each scale (2 threads).
+"""
+from __future__ import annotations
+
+import numpy as np
+from bench_taau import orbit_parser, orbit_scene
+
+from volsr_core.apps.bench.report import curve_psnr_at
+from volsr_core.runtime.methods import Method, Native, ReducedSize, Taau, VolSR
+from volsr_core.runtime.models import model_file
+from volsr_core.runtime.pipeline import Pipeline
+from volsr_core.sr.metrics import psnr_ssim
+from volsr_core.temporal import render_supersampled
+
+WARMUP = 4
+FACTORS = (2, 3, 4, 6, 8)
+
+
+def name(method: Method) -> str:
+    """The method's label, a VolSR pipeline's slabs added."""
+    slabs = getattr(getattr(method, "pipeline", None), "slabs", 0)
+    return f"{method.label} in {slabs} slabs" if slabs else method.label
+
+
+def main() -> None:
+    parser = orbit_parser(__doc__.split("\n\n")[0])
+    parser.set_defaults(sizes="512")
+    parser.add_argument("--slabs", default="2,4")
+    args = parser.parse_args()
+    scene, caster, cameras = orbit_scene(args)
+    for size in (int(s) for s in args.sizes.split(",")):
+        shape = (size, size)
+        truth = [render_supersampled(caster, c, size, size, spp=16, seed=10**6 + 16 * t) for t, c in enumerate(cameras)]
+        curve = [Native(caster, shape)] + [ReducedSize(caster, shape, f) for f in FACTORS]
+        temporal = [Taau(caster, shape, int(s), k) for s in args.scales.split(",") for k in
+                    [0] + [int(k) for k in args.slabs.split(",")]]
+        temporal += [VolSR(Pipeline(scene.volume, scene.transfer_function, model_file("XS", int(s), "onnx"),
+                                    size=shape, threads=2, slabs=k), "XS")
+                     for s in args.scales.split(",") for k in [0] + [int(k) for k in args.slabs.split(",")]]
+        scores: dict[str, list[float]] = {name(m): [] for m in curve + temporal}
+        ms: dict[str, list[tuple[float, float]]] = {name(m): [] for m in curve + temporal}
+        for t, camera in enumerate(cameras):
+            for method in curve + temporal:
+                frame = method(camera)
+                if t >= WARMUP:
+                    scores[name(method)].append(psnr_ssim(frame.image, truth[t], channel_axis=-1)[0])
+                    ms[name(method)].append((frame.ms_render, frame.ms_upscale))
+        psnr = {k: float(np.mean(v)) for k, v in scores.items()}
+        total = {k: float(np.median([r + u for r, u in v])) for k, v in ms.items()}
+        curve_ms = [total[name(m)] for m in curve]
+        curve_db = [psnr[name(m)] for m in curve]
+        print(f"\n{scene.label}, {size}², {args.degrees:g}° per frame\n")
+        print("| method | PSNR dB | render ms | upscale ms | total ms | vs curve dB |\n|---|---:|---:|---:|---:|---:|")
+        for method in curve + temporal:
+            label = name(method)
+            render, upscale = (float(np.median([p[i] for p in ms[label]])) for i in (0, 1))
+            gap = "" if method in curve else f"{psnr[label] - curve_psnr_at(curve_ms, curve_db, total[label]):+.2f}"
+            print(f"| {label} | {psnr[label]:.2f} | {render:.1f} | {upscale:.1f} | {total[label]:.1f} | {gap} |",
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,85 @@
+"""Depth slabs (``RayCaster.render(..., slabs=K)``): the same pass cut into K depth slabs, each composited apart."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_render_reference import oblique_volume, shaded_tf
+
+from volsr_core.render import RayCaster
+from volsr_core.scene import Camera, TransferFunction, Volume
+
+
+def composite(slabs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Premultiplied RGB and alpha of (K, H, W, 6) slabs composited front to back."""
+    colour, transmittance = np.zeros(slabs.shape[1:3] + (3,)), np.ones(slabs.shape[1:3] + (1,))
+    for slab in slabs.astype(np.float64):
+        colour += transmittance * slab[..., :3]
+        transmittance *= 1.0 - slab[..., 3:4]
+    return colour, 1.0 - transmittance[..., 0]
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+@pytest.mark.parametrize("n_slabs", [1, 3])
+def test_the_slabs_composite_to_the_frame(parallel, n_slabs):
+    volume = oblique_volume()
+    caster = RayCaster(volume, shaded_tf(), block_size=4, background=(0.2, 0.3, 0.4), start_jitter="ign")
+    camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1),
+                            parallel_projection=parallel).zoom(1.5)
+    frame = caster.render(camera, 24, 20, jitter=(0.2, -0.3), previous_camera=camera.azimuth(3), seed=5,
+                          slabs=n_slabs)
+    assert frame.slabs.shape == (n_slabs, 20, 24, 6)
+    colour, alpha = composite(frame.slabs)
+    assert frame.alpha.max() > 0.5, "scene must be visible"
+    np.testing.assert_allclose(alpha, frame.alpha, atol=1e-5)
+    np.testing.assert_allclose(colour + (1.0 - alpha[..., None]) * (0.2, 0.3, 0.4), frame.color, atol=1e-5)
+    if n_slabs == 3:
+        assert sum((frame.slabs[k, ..., 3] > 1e-3).any() for k in range(3)) >= 2, "the volume must span slabs"
+    assert caster.render(camera, 24, 20).slabs is None
+
+
+def test_one_slab_moves_with_the_opacity_weighted_mean_point():
+    volume = oblique_volume()
+    camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1)).zoom(1.5)
+    kwargs = dict(jitter=(0.1, 0.2), previous_camera=camera.azimuth(4).elevation(2), seed=2)
+    frame = RayCaster(volume, shaded_tf(), motion_depth="mean").render(camera, 16, 16, slabs=1, **kwargs)
+    shown = frame.alpha > 1e-3
+    assert shown.mean() > 0.3
+    np.testing.assert_allclose(frame.slabs[0, ..., 4:6][shown], frame.motion[shown], atol=1e-4)
+    assert np.all(frame.slabs[0, ..., 4:6][~(frame.slabs[0, ..., 3] > 0)] == 0.0)
+
+
+def plates(front: bool, back: bool) -> Volume:
+    """Two semi-transparent plates across a 40³ volume, 22 voxels apart along z (values 500 and 300)."""
+    array = np.zeros((40, 40, 40), dtype=np.float32)
+    if front:
+        array[8:10, 5:35, 5:35] = 500.0
+    if back:
+        array[30:32, 5:35, 5:35] = 300.0
+    return Volume(array, spacing=(1.0, 1.0, 1.0))
+
+
+def test_two_plates_fall_into_two_slabs_each_as_if_rendered_alone():
+    """Two plates, each in a slab of its own: each slab holds what a render of its plate alone holds, unattenuated
+    by the plate in front, and moves as that plate's own opacity-weighted mean point does."""
+    tf = TransferFunction(color=[[0, 0, 0, 0], [300, 1.0, 0.2, 0.1], [500, 0.1, 0.3, 1.0]],
+                          scalar_opacity=[[0, 0.0], [250, 0.0], [300, 0.3], [500, 0.5]])
+    camera = Camera.framing(plates(True, True).bounds, direction=(0.05, 0.1, 1.0), view_up=(0, 1, 0)).zoom(1.3)
+    kwargs = dict(jitter=(0.25, -0.25), previous_camera=camera.azimuth(5))
+    both = RayCaster(plates(True, True), tf, motion_depth="mean").render(camera, 20, 20, slabs=2, **kwargs)
+    for k, alone in enumerate((plates(True, False), plates(False, True))):
+        frame = RayCaster(alone, tf, motion_depth="mean").render(camera, 20, 20, **kwargs)
+        shown = frame.alpha > 1e-3
+        assert shown.mean() > 0.15 and frame.alpha.max() > 0.2
+        np.testing.assert_allclose(both.slabs[k, ..., 3], frame.alpha, atol=1e-5)
+        np.testing.assert_allclose(both.slabs[k, ..., :3], frame.color, atol=1e-5)  # black background
+        np.testing.assert_allclose(both.slabs[k, ..., 4:6][shown], frame.motion[shown], atol=1e-4)
+    parallax = np.abs(both.slabs[0, ..., 4] - both.slabs[1, ..., 4])[both.slabs[1, ..., 3] > 1e-3]
+    assert parallax.mean() > 0.5, "the plates must move apart, or the test shows nothing"
+
+
+def test_bad_slab_counts_are_rejected():
+    caster = RayCaster(plates(True, True), shaded_tf())
+    camera = Camera.framing(plates(True, True).bounds)
+    for bad in (-1, 1.5):
+        with pytest.raises(ValueError, match="slabs"):
+            caster.render(camera, 4, slabs=bad)

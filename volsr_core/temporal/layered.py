@@ -1,0 +1,182 @@
+"""Layered temporal upsampling: TAAU with one history per depth slab, each reprojected by its own vectors.
+
+A ray of a volume rendering shows structures at several depths, which move apart as the view rotates
+(vessels in front of vessels, bone behind soft tissue: up to 7 px of parallax per 2° at 512²), while
+one motion vector per pixel moves them together; so TAAU's one-layer history goes stale under rotation
+(docs/performance.md, "What the 4x points lack"). Here the ray caster cuts each ray into K depth slabs
+in its one pass (``RayCaster.render(..., slabs=K)``: per slab its samples' premultiplied RGBA and the
+motion vector of their opacity-weighted mean point) and each slab keeps its own HR history. Per HR
+pixel and slab, the steps of :class:`~volsr_core.temporal.taau.TemporalUpsampler` on premultiplied RGBA:
+
+1. **Current estimate**: the slab's 2x2 LR samples around the pixel, Gaussian-weighted (``sigma``), blended
+   with bilinear weights where the frame samples the volume finely (TAAU's smoothing);
+2. **Motion**: the slab's vector at the nearest LR sample, or where that sample's slab is empty, at the
+   most opaque sample of the slab in its 3x3 neighbourhood; a slab empty in all nine is empty here
+   (its history is cleared and the pixel costs next to nothing);
+3. **History**: bilinear fetch of the slab's premultiplied RGBA and accumulated weight;
+4. **Rectification**: per-channel clamp into the slab's RGBA min/max box of the 3x3 LR neighbourhood
+   (skipped when nothing moves at all, as TAAU does);
+5. blend as TAAU (``out = (n * history + a * estimate) / (n + a)``, ``n`` capped by the view's rotation);
+
+then the slabs are composited front to back over the background. No depth test: a structure that
+moves in front of another lies in another slab. Settings, caps and the still-camera behaviour are
+TAAU's (the same constructor); the depth test's ``disocclusion`` and ``dis_motion`` are not used.
+Measured in docs/temporal.md ("Layered history"); feed it ``halton_jitter(frame, jitter_phases(scale))``.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from volsr_core.render.layout import SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA
+from volsr_core.temporal.taau import TemporalUpsampler, _moves, _row_window, _splat_weights
+
+_NB = dict(fastmath=True, boundscheck=False, cache=True)
+_EMPTY = 1e-4  # a slab with at most this alpha at an LR sample shows nothing there
+_INFO = 11  # per slab and LR pixel: RGBA box low (4) and high (4), motion (2), whether the 3x3 shows anything
+
+
+@numba.njit(parallel=True, **_NB)
+def _prepass(slabs, info):
+    """Per slab and LR pixel of ``slabs`` (K, h, w, SLAB_CHANNELS): the 3x3 neighbourhood's RGBA min/max, the
+    motion vector the HR pixels nearest it take (its own where its slab shows something, else that of the most
+    opaque neighbour) and whether any of the nine shows something, into ``info`` (K, h, w, _INFO)."""
+    n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
+    for j in numba.prange(h):
+        for k in range(n_slabs):
+            for i in range(w):
+                for c in range(4):
+                    info[k, j, i, c] = np.float32(1e30)
+                    info[k, j, i, 4 + c] = np.float32(-1e30)
+                best = np.float32(_EMPTY)
+                mx = my = np.float32(0.0)
+                for yy in range(max(j - 1, 0), min(j + 2, h)):
+                    for xx in range(max(i - 1, 0), min(i + 2, w)):
+                        for c in range(4):
+                            v = slabs[k, yy, xx, SLAB_RGBA + c]
+                            info[k, j, i, c] = min(info[k, j, i, c], v)
+                            info[k, j, i, 4 + c] = max(info[k, j, i, 4 + c], v)
+                        a = slabs[k, yy, xx, SLAB_RGBA + 3]
+                        if a > best:
+                            best, mx, my = a, slabs[k, yy, xx, SLAB_MOTION], slabs[k, yy, xx, SLAB_MOTION + 1]
+                if slabs[k, j, i, SLAB_RGBA + 3] > _EMPTY:
+                    mx, my = slabs[k, j, i, SLAB_MOTION], slabs[k, j, i, SLAB_MOTION + 1]
+                info[k, j, i, 8] = mx
+                info[k, j, i, 9] = my
+                info[k, j, i, 10] = 1.0 if best > _EMPTY else 0.0
+
+
+@numba.njit(**_NB)
+def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
+         out, new_history, acc):
+    n_slabs, hr_h, hr_w = new_history.shape[0], new_history.shape[1], new_history.shape[2]
+    lr_h, lr_w = slabs.shape[1], slabs.shape[2]
+    ly, y0, y1, dy0, wy0, wy1 = _row_window(y, scale, jy, lr_h, inv2s2)
+    acc[:] = 0.0  # the row's composite so far: premultiplied RGB and alpha
+    for k in range(n_slabs):
+        # the HR pixels whose nearest LR sample is lx (columns runs[lx] .. runs[lx + 1] - 1) share its slab's
+        # motion and box, so the history's rows and their weights are found once per run
+        for lx in range(lr_w):
+            if info[k, ly, lx, 10] == 0.0:  # the slab shows nothing around here: an empty history
+                for x in range(runs[lx], runs[lx + 1]):
+                    for c in range(5):
+                        new_history[k, y, x, c] = 0.0
+                continue
+            mx = scale * info[k, ly, lx, 8]
+            sy = y + scale * info[k, ly, lx, 9]
+            rows_in = has_history and -0.5 < sy < hr_h - 0.5
+            sy = min(max(sy, 0.0), hr_h - 1.0)
+            iy = min(int(sy), hr_h - 2) if hr_h > 1 else 0
+            iy1 = min(iy + 1, hr_h - 1)
+            ty = sy - iy
+            for x in range(runs[lx], runs[lx + 1]):
+                x0 = int(cols[x, 1])
+                x1 = int(cols[x, 2])
+                w00, w01, w10, w11, a, inv = _splat_weights(wy0, wy1, cols[x, 3], cols[x, 4], dy0, cols[x, 5], tent)
+                n = 0.0
+                b00 = b01 = b10 = b11 = 0.0
+                ix = ix1 = 0
+                sx = x + mx
+                if rows_in and -0.5 < sx < hr_w - 0.5:
+                    sx = min(max(sx, 0.0), hr_w - 1.0)
+                    ix = min(int(sx), hr_w - 2) if hr_w > 1 else 0
+                    ix1 = min(ix + 1, hr_w - 1)
+                    tx = sx - ix
+                    b00, b01, b10, b11 = (1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty
+                    n = min(b00 * history[k, iy, ix, 4] + b01 * history[k, iy, ix1, 4]
+                            + b10 * history[k, iy1, ix, 4] + b11 * history[k, iy1, ix1, 4], cap)
+                share = 1.0 / (n + a)
+                behind = 1.0 - acc[x, 3]
+                for c in range(4):
+                    o = (w00 * slabs[k, y0, x0, c] + w01 * slabs[k, y0, x1, c]
+                         + w10 * slabs[k, y1, x0, c] + w11 * slabs[k, y1, x1, c]) * inv
+                    if n > 0.0:
+                        past = (b00 * history[k, iy, ix, c] + b01 * history[k, iy, ix1, c]
+                                + b10 * history[k, iy1, ix, c] + b11 * history[k, iy1, ix1, c])
+                        if rectify:
+                            past = min(max(past, info[k, ly, lx, c]), info[k, ly, lx, 4 + c])
+                        o = (n * past + a * o) * share
+                    new_history[k, y, x, c] = o
+                    acc[x, c] += behind * o
+                new_history[k, y, x, 4] = min(n + a, cap)
+    for x in range(hr_w):
+        behind = 1.0 - acc[x, 3]
+        for c in range(3):
+            out[y, x, c] = acc[x, c] + behind * background[c]
+
+
+@numba.njit(parallel=True, **_NB)
+def _kernel(history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background, out,
+            new_history):
+    for y in numba.prange(out.shape[0]):
+        acc = np.empty((out.shape[1], 4), dtype=np.float32)
+        _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
+             out, new_history, acc)
+
+
+class LayeredUpsampler(TemporalUpsampler):
+    """Temporal upsampling of jittered LR frames cut into depth slabs, one history per slab (one call per frame).
+
+    The constructor is :class:`~volsr_core.temporal.taau.TemporalUpsampler`'s, with ``sigma`` 0.25 LR px by
+    default (measured: docs/temporal.md, "Layered history"); the number of slabs is the frames' own
+    (``RayCaster.render(..., slabs=K)``).
+    """
+
+    def __init__(self, scale: int, *, sigma: float = 0.25, **settings):
+        super().__init__(scale, sigma=sigma, side_outputs=False, **settings)
+        self._info: np.ndarray | None = None
+
+    def __call__(self, lr_slabs: np.ndarray, jitter: tuple[float, float], background=(0.0, 0.0, 0.0),
+                 rotation: float | None = None, pixels_per_voxel: float | None = None) -> np.ndarray:
+        """Accumulate one LR frame given as its depth slabs; returns a new (h * scale, w * scale, 3) float32 image.
+
+        ``lr_slabs`` (K, h, w, SLAB_CHANNELS): :attr:`~volsr_core.render.features.FeatureFrame.slabs`, nearest
+        first, motion in LR pixels; ``jitter`` (jx, jy) in [-0.5, 0.5); ``background`` the RGB the slabs are
+        composited over (the ray caster's); ``rotation`` and ``pixels_per_voxel`` as
+        :meth:`TemporalUpsampler.__call__` takes them. A change in K or size starts a new history.
+        """
+        slabs = np.asarray(lr_slabs, dtype=np.float32)
+        if slabs.ndim != 4 or slabs.shape[3] != SLAB_CHANNELS or slabs.shape[0] < 1:
+            raise ValueError(f"expected slabs (K, h, w, {SLAB_CHANNELS}), got {np.shape(lr_slabs)}")
+        jx, jy = float(jitter[0]), float(jitter[1])
+        if not (-0.5 <= jx < 0.5 and -0.5 <= jy < 0.5):
+            raise ValueError(f"jitter must lie in [-0.5, 0.5), got {jitter}")
+        n_slabs, h, w = slabs.shape[:3]
+        s = self.scale
+        shape = (n_slabs, h * s, w * s, 5)  # per slab: premultiplied RGBA, accumulated weight
+        has = self.history is not None and self.history.shape == shape
+        history = self.history if has else np.zeros((1, 1, 1, 5), dtype=np.float32)
+        motion = slabs.reshape(n_slabs * h, w, SLAB_CHANNELS)[..., SLAB_MOTION:SLAB_MOTION + 2]
+        static, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
+        cols, runs = self._columns(w, jx, sigma)
+        if self._info is None or self._info.shape[:3] != (n_slabs, h, w):
+            self._info = np.empty((n_slabs, h, w, _INFO), dtype=np.float32)
+        _prepass(slabs, self._info)
+        new_history = self._spare if self._spare is not None and self._spare.shape == shape else \
+            np.empty(shape, dtype=np.float32)
+        out = np.empty((h * s, w * s, 3), dtype=np.float32)
+        _kernel(history, has, slabs, self._info, cols, runs, s, jy, 1.0 / (2.0 * sigma * sigma), tent, cap,
+                not static, np.asarray(background, dtype=np.float32), out, new_history)
+        self._spare = self.history if has else None
+        self.history = new_history
+        return out
