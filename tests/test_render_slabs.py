@@ -77,6 +77,23 @@ def test_two_plates_fall_into_two_slabs_each_as_if_rendered_alone():
     assert parallax.mean() > 0.5, "the plates must move apart, or the test shows nothing"
 
 
+def test_slabs_leave_the_frames_features_as_they_are_and_its_colour_within_what_early_termination_drops():
+    """Behind an opaque front the ray marches on through the hidden slabs (at a longer step): the features are
+    those of a render without slabs, and colour and alpha differ by at most the light early termination drops."""
+    volume = oblique_volume()
+    caster = RayCaster(volume, shaded_tf(), early_termination=0.8, start_jitter="ign")
+    camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1)).zoom(1.5)
+    kwargs = dict(jitter=(0.2, -0.3), previous_camera=camera.azimuth(3), seed=4)
+    plain, layered = caster.render(camera, 24, 20, **kwargs), caster.render(camera, 24, 20, slabs=3, **kwargs)
+    terminated = plain.alpha >= 0.8
+    assert terminated.mean() > 0.03, "the front must end rays, or the test shows nothing"
+    assert (layered.slabs[1:, ..., 3][:, terminated] > 1e-3).any(), "the slabs behind must hold something"
+    features = [c for c in range(plain.data.shape[2]) if c not in (0, 1, 2, 3)]
+    np.testing.assert_array_equal(layered.data[..., features], plain.data[..., features])
+    assert np.abs(layered.data[..., :4] - plain.data[..., :4]).max() <= 0.2 + 1e-6
+    np.testing.assert_array_equal(layered.data[~terminated], plain.data[~terminated])
+
+
 def test_bad_slab_counts_are_rejected():
     caster = RayCaster(plates(True, True), shaded_tf())
     camera = Camera.framing(plates(True, True).bounds)

@@ -32,7 +32,8 @@ and for a visible sample (alpha > 0):
   opacity-weighted sum of the samples' depths;
 - ``slab_index`` and ``store_slab`` (when the frame asks for depth slabs, ``P_SLABS`` > 0): the same
   samples composited apart per depth slab, each slab's partial composite and motion vector stored
-  as the ray leaves it; an opaque slab skips to the next (``next_slab_sample``) instead of ending the ray;
+  as the ray leaves it; an opaque slab skips to the next (``next_slab_sample``) instead of ending the ray,
+  and behind an opaque front the hidden slabs are sampled every ``HIDDEN_STRIDE``-th step;
 - ``terminated``: early ray termination (with slabs, per slab);
 
 and last ``motion_point`` (the point motion vectors reproject: max alpha, opacity threshold or
@@ -62,6 +63,12 @@ from volsr_core.render.layout import (
     P_DEPTH_THRESHOLD, P_DIFFUSE, P_ERT, P_GLUT_INV_DX, P_GRAD_OPACITY, P_HAS_PREV, P_LUT_INV_DX, P_LUT_X0, P_SEED,
     P_SHADE, P_SLABS, P_SPEC_POWER, P_SPECULAR, P_START_JITTER, P_STEP, SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA,
 )
+
+
+# Behind an opaque front (accumulated alpha past early termination) the slabs it hides are sampled every
+# HIDDEN_STRIDE-th step, the opacity corrected for the longer step: they only feed the layered TAAU's history
+# of what may show next, and 4 cut their render time by half or more at no measured cost (docs/renderer.md).
+HIDDEN_STRIDE = 4
 
 
 def build_ray_program(jit: Callable) -> Callable:
@@ -450,6 +457,9 @@ def build_ray_program(jit: Callable) -> Callable:
         threshold = params[P_DEPTH_THRESHOLD]
         t_cross, sum_w, sum_wt = -1.0, 0.0, 0.0  # for the point motion vectors reproject
         k = 0
+        stride = 1  # samples per step: HIDDEN_STRIDE once the slabs left to march are hidden
+        hidden_stride = HIDDEN_STRIDE if n_slabs > 0 else 1
+        ert = params[P_ERT]
         while k < n_steps:
             t = t0 + k * step
             px, py, pz = sample_position(t, oi, oj, ok, di, dj, dk)
@@ -463,10 +473,13 @@ def build_ray_program(jit: Callable) -> Callable:
                 if needs_gradient(params):
                     gx, gy, gz = gradient(vol, px, py, pz, grad_w)
                     r, g, b, a = shade(r, g, b, a, gx, gy, gz, dx, dy, dz, glut, params)
-                mr, mg, mb, ma, t_max = track_max_alpha(r, g, b, a, t, mr, mg, mb, ma, t_max)
+                if stride > 1:  # a hidden slab's longer step
+                    a = 1.0 - (1.0 - a) ** stride
                 ca_before = ca
                 cr, cg, cb, ca = composite(r, g, b, a, cr, cg, cb, ca)
-                t_cross, sum_w, sum_wt = track_motion_point(t, ca_before, ca, t_cross, sum_w, sum_wt, threshold)
+                if stride == 1:  # the features see the samples a render without slabs sees
+                    mr, mg, mb, ma, t_max = track_max_alpha(r, g, b, a, t, mr, mg, mb, ma, t_max)
+                    t_cross, sum_w, sum_wt = track_motion_point(t, ca_before, ca, t_cross, sum_w, sum_wt, threshold)
                 if n_slabs > 0:
                     k_slab = slab_index(t, slab_rate, slab_offset, n_slabs)
                     if k_slab != slab:
@@ -484,7 +497,9 @@ def build_ray_program(jit: Callable) -> Callable:
                         continue
                 elif terminated(ca, params):
                     break
-            k += 1
+            k += stride
+            if stride < hidden_stride and ca >= ert:
+                stride = hidden_stride
         if slab >= 0:
             store_slab(x, y, slab, sr, sg, sb, sa, s_w, s_wt, ox, oy, oz, dx, dy, dz, width, height, cam, params,
                        prev_vp, slabs)
