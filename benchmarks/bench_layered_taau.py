@@ -9,7 +9,8 @@ Every method renders every frame of the orbit (interleaved frame by frame, the r
 ``volsr bench`` renders); PSNR against the 16-spp reference is the mean over the frames after the first four,
 times are medians over the same frames. The curve runs through native 1 spp and the 1/2, 1/3, 1/4, 1/6 and 1/8
 size + bilinear points (:func:`~volsr_core.apps.bench.report.curve_psnr_at`, the bench's target 2); each TAAU
-and VolSR row gives its distance to it at its own time. VolSR rows run the shipped XS model of each scale (2 threads).
+and VolSR row gives its distance to it at its own time. VolSR rows run the shipped XS model of each scale that has
+one (2 threads).
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from bench_taau import orbit_parser, orbit_scene
 
 from volsr_core.apps.bench.report import curve_psnr_at
 from volsr_core.runtime.methods import Method, Native, ReducedSize, Taau, VolSR
-from volsr_core.runtime.models import model_file
+from volsr_core.runtime.models import model_file, shipped_models
 from volsr_core.runtime.pipeline import Pipeline
 from volsr_core.sr.metrics import psnr_ssim
 from volsr_core.temporal import render_supersampled
@@ -39,6 +40,7 @@ def main() -> None:
     parser.add_argument("--slabs", default="2,4")
     args = parser.parse_args()
     scene, caster, cameras = orbit_scene(args)
+    shipped = {(entry["variant"], int(entry["scale"])) for entry in shipped_models()}
     for size in (int(s) for s in args.sizes.split(",")):
         shape = (size, size)
         truth = [render_supersampled(caster, c, size, size, spp=16, seed=10**6 + 16 * t) for t, c in enumerate(cameras)]
@@ -47,7 +49,8 @@ def main() -> None:
                     [0] + [int(k) for k in args.slabs.split(",")]]
         temporal += [VolSR(Pipeline(scene.volume, scene.transfer_function, model_file("XS", int(s), "onnx"),
                                     size=shape, threads=2, slabs=k), "XS")
-                     for s in args.scales.split(",") for k in [0] + [int(k) for k in args.slabs.split(",")]]
+                     for s in args.scales.split(",") if ("XS", int(s)) in shipped
+                     for k in [0] + [int(k) for k in args.slabs.split(",")]]
         scores: dict[str, list[float]] = {name(m): [] for m in curve + temporal}
         ms: dict[str, list[tuple[float, float]]] = {name(m): [] for m in curve + temporal}
         for t, camera in enumerate(cameras):

@@ -144,6 +144,30 @@ def test_an_xs_pipeline_in_depth_slabs_filters_the_layered_taau_estimate(tmp_pat
         Pipeline(volume, get_preset("CT-Phantom"), s_model, scale=2, slabs=2)
 
 
+def test_xs_at_4x_and_more_runs_in_two_depth_slabs_unless_told_otherwise(tmp_path):
+    """The default slabs (None): two for XS on TAAU at 4x and 8x, none for XS 2x, XS on the bilinear upscale or a
+    U-Net model; slabs=0 gives the TAAU on the frame's colour; a negative count is refused."""
+    from volsr_core.runtime.engines import open_engine
+    from volsr_core.runtime.upscaler import default_slabs
+
+    cases = {"xs4": (variant_config("XS", 4, taau_base=True), 2), "xs8": (variant_config("XS", 8, taau_base=True), 2),
+             "xs2": (variant_config("XS", 2, taau_base=True), 0),
+             "xs4bilinear": (variant_config("XS", 4), 0),
+             "s4": (variant_config("S", 4, taau_base=True), 0)}
+    for name, (config, slabs) in cases.items():
+        engine = open_engine(export_onnx(SuperResolutionNet(config), tmp_path / f"{name}.onnx"))
+        assert default_slabs(engine) == slabs, name
+        assert StatefulUpscaler(engine).slabs == slabs and StatefulUpscaler(engine, slabs=0).slabs == 0
+    volume = Volume.from_record(make_phantom(shape=(48, 48, 48), spacing=(2.0, 2.0, 2.0)))
+    for slabs, rendered in ((None, (2, 16, 16, 6)), (0, None)):  # the shipped XS 4x
+        pipeline = Pipeline(volume, get_preset("CT-Phantom"), scale=4, size=(64, 64), threads=2, slabs=slabs)
+        assert pipeline.render(Camera.framing(pipeline.caster.visible_bounds())).shape == (64, 64, 3)
+        lr_slabs = pipeline.last_low_resolution.slabs
+        assert (lr_slabs if lr_slabs is None else lr_slabs.shape) == rendered
+    with pytest.raises(ValueError, match="0 or more"):
+        Pipeline(volume, get_preset("CT-Phantom"), scale=4, slabs=-1)
+
+
 def test_work_buffers_kept_between_frames_change_no_result():
     rng = np.random.default_rng(5)
     weights, bias = rng.normal(0, 0.2, (2, 3, 5, 5)).astype(np.float32), rng.normal(0, 0.1, (2, 3)).astype(np.float32)

@@ -144,6 +144,13 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path, model_s4, capsys):
     assert main(["upscale", "--model", str(model_s4), "--out", str(blocker)]) == 2
     assert main(["upscale", "--model", str(model_s4), "--out", str(tmp_path), "--video", str(blocker / "x.mp4")]) == 2
     assert "exists and is not a folder" in capsys.readouterr().err
+    assert main(["upscale", "--model", str(model_s4), "--slabs", "2", "--out", str(tmp_path)]) == 2
+    assert "s4.onnx: takes no depth slabs (--slabs 2)" in capsys.readouterr().err
+    assert main(["upscale", "--slabs", "1", "--budget-ms", "50", "--out", str(tmp_path)]) == 2
+    assert "--slabs: --budget-ms runs each model with its own depth slabs" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stopped:
+        main(["upscale", "--slabs", "9", "--out", str(tmp_path)])
+    assert stopped.value.code == 2 and "must be auto or an integer in [0, 8], got '9'" in capsys.readouterr().err
 
 
 def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
@@ -154,6 +161,11 @@ def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
     assert "upscaled 1 of 1 input(s) 2x with volsr-XS-2x.onnx" in out and "from 16x16" in out
     assert main(["upscale", "--orbit", "1", "--size", "32", "--scale", "8", "--out", str(tmp_path / "b")]) == 0
     assert "8x with volsr-S-8x.onnx" in capsys.readouterr().out
+    assert main(["upscale", "--orbit", "2", "--size", "32", "--scale", "4", "--out", str(tmp_path / "c")]) == 0
+    assert "4x with volsr-XS-4x.onnx" in (out := capsys.readouterr().out) and "from 8x8 in 2 depth slabs" in out
+    assert main(["upscale", "--orbit", "2", "--size", "32", "--scale", "4", "--slabs", "0",
+                 "--out", str(tmp_path / "d")]) == 0
+    assert "from 8x8;" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("stop", [KeyboardInterrupt, RuntimeError])

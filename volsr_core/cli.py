@@ -16,7 +16,7 @@ import numpy as np
 
 from volsr_core.apps.options import (
     IMAGE_SUFFIXES, MAX_SAMPLES_PER_VOXEL, add_volume_arguments, check_sample_distance, load_volume_argument, number,
-    output_file, output_folder, parse_range, parse_rgb, parse_size,
+    output_file, output_folder, parse_range, parse_rgb, parse_size, parse_slabs,
 )
 from volsr_core.errors import WRITE_ERRNOS, InputError, OutputError, VolSRError, require_extra, write_error
 from volsr_core.runtime.models import DEFAULT_SCALE, default_variant
@@ -206,6 +206,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     from volsr_core.runtime.engines import open_engine
     from volsr_core.runtime.models import model_file
     from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.runtime.upscaler import takes_slabs
     from volsr_core.scene.camera_paths import read_camera_path
     from volsr_core.scene.presets import choose_transfer_function, get_preset, load_transfer_function
 
@@ -237,10 +238,16 @@ def cmd_upscale(args: argparse.Namespace) -> int:
         variant = variant or default_variant(scale)
         if variant != "auto" and args.budget_ms is None:
             model = model_file(variant, scale)
+    if args.slabs and args.budget_ms is not None:
+        raise InputError("--slabs", "--budget-ms runs each model with its own depth slabs; give --slabs without it")
     if model is not None:  # opened once, before any rendering: a missing extra or a bad file stops here
-        model_scale = open_engine(model, device=args.device).config.scale
+        engine = open_engine(model, device=args.device)
+        model_scale = engine.config.scale
         if scale is not None and model_scale != scale:
             raise InputError(model, f"the model upscales {model_scale}x, not {scale}x (--scale)")
+        if args.slabs and not takes_slabs(engine):
+            raise InputError(model, f"takes no depth slabs (--slabs {args.slabs}): only a base-filter model on TAAU "
+                             "(variant XS, on the CPU) refines the layered TAAU")
         scale = model_scale
 
     for part in stale_parts(out / "summary.md"):  # left by a killed run
@@ -269,7 +276,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                     variant, model = batch.auto_variant(caster, cameras[0], args.size, scale, device=args.device)
                 pipeline = Pipeline(volume, tf, model, scale=scale, size=args.size, variant=variant,
                                     device=args.device, sample_distance=args.sample_distance,
-                                    background=args.background)
+                                    background=args.background, slabs=args.slabs)
             batch.upscale_cameras(pipeline, cameras, out / item.name, video=videos.get(item.name), fps=args.fps,
                                   side_by_side_panels=args.side_by_side, reference_spp=args.reference_spp,
                                   summary=summary, bilinear_scale=scale)
@@ -357,6 +364,10 @@ def add_upscale_parser(sub) -> None:
                     "left out); a camera that holds still refines instead, one more full-size jittered sample per "
                     "frame (after N still frames: the native N-spp image); --scale then only sets the bilinear "
                     "panel's size")
+    up.add_argument("--slabs", type=parse_slabs, default=None, metavar="auto|K",
+                    help="render each frame in K depth slabs, each with its own TAAU history (the layered TAAU, "
+                    "docs/temporal.md), for an XS model to refine; 0: the TAAU on the frame's colour [auto: the "
+                    "model's own, 2 for XS at 4x and more, else 0]")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                     help="where rays are cast and the network runs [cpu]")
     up.add_argument("--sample-distance", type=MILLIMETRES, metavar="MM",

@@ -80,6 +80,22 @@ def parse_rgb(text: str) -> tuple[float, float, float]:
     return values
 
 
+MAX_SLABS = 8  # depth slabs a command line may ask for: the render and the history grow with each
+
+
+def parse_slabs(text: str) -> int | None:
+    """'auto' -> None (the model's own depth slabs); an integer in 0..MAX_SLABS -> itself."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= MAX_SLABS:
+        raise argparse.ArgumentTypeError(f"must be auto or an integer in [0, {MAX_SLABS}], got {text!r}")
+    return value
+
+
 def parse_range(text: str) -> tuple[float, float] | str:
     """'auto', 'none' or 'LO,HI' (:func:`~volsr_core.scene.presets.parse_placement`), for argparse."""
     try:

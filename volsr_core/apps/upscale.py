@@ -192,6 +192,7 @@ class InputSummary:
     frames: int = 0
     size: tuple[int, int] = (0, 0)
     low_resolution_size: tuple[int, int] = (0, 0)
+    slabs: int = 0  # depth slabs each LR frame was rendered in (the layered TAAU's), 0: none
     timings: dict[str, list[float]] = field(default_factory=lambda: {"render_ms": [], "network_ms": [],
                                                                      "total_ms": []})
     method_ms: dict[str, list[float]] = field(default_factory=dict)  # method -> total ms per frame
@@ -227,6 +228,7 @@ class InputSummary:
             return f"{self.name}: FAILED{done}: {self.error}"
         (w, h), (lw, lh) = self.size, self.low_resolution_size
         source = "" if self.levels else f" from {lw}x{lh}"  # frame-budget mode: the levels' sizes vary
+        source += f" in {self.slabs} depth slabs" if self.slabs else ""
         text = (f"{self.name}: {self.frames} frames of {w}x{h}{source}; VolSR ms per frame (median): "
                 f"LR render {self.ms('render_ms'):.1f}, network {self.ms('network_ms'):.1f}, "
                 f"total {self.ms('total_ms'):.1f}")
@@ -314,6 +316,7 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
         Path(video).parent.mkdir(parents=True, exist_ok=True)
     summary = summary or InputSummary(out_dir.name, "")
     summary.size, summary.low_resolution_size = pipeline.size, pipeline.low_resolution_size
+    summary.slabs = getattr(pipeline, "slabs", 0)  # a frame-budget renderer has none of its own
     summary.reference_spp = int(reference_spp)
     width, height = pipeline.size
     caster = pipeline.caster  # the same volume, transfer function, step and background as the LR frames

@@ -57,12 +57,14 @@ class Method:
     """Base of the comparison methods: ``method(camera)`` -> :class:`MethodFrame`; :meth:`reset` is a cut.
 
     ``kind`` ("native", "bilinear", "bicubic", "taau", "volsr"), ``scale`` (the size reduction; 1 for
-    native), ``spp``, ``variant`` and ``model`` (VolSR) describe it; ``label`` names it in reports.
+    native), ``spp``, ``slabs`` (the depth slabs rendered: TAAU and VolSR on a layered history), ``variant``
+    and ``model`` (VolSR) describe it; ``label`` names it in reports.
     """
 
     kind = ""
     scale = 1
     spp = 1
+    slabs = 0
     variant: str | None = None
     model: str | None = None
 
@@ -207,8 +209,14 @@ class VolSR(Method):
         self.variant, self.model = variant, model
 
     @property
+    def slabs(self) -> int:
+        """The depth slabs the pipeline renders (0: none, the TAAU on the frame's colour; a frame-budget renderer,
+        whose levels differ, has none of its own)."""
+        return getattr(self.pipeline, "slabs", 0)
+
+    @property
     def label(self) -> str:
-        return f"VolSR {self.variant} {self.scale}x"
+        return f"VolSR {self.variant} {self.scale}x" + (f" in {self.slabs} slabs" if self.slabs else "")
 
     def reset(self) -> None:
         self.pipeline.reset()

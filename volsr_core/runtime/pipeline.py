@@ -39,7 +39,9 @@ class Pipeline:
     - ``max_turn`` (degrees), ``max_zoom``: a camera that turned or zoomed further than this since
       the last frame is a cut (:func:`~volsr_core.runtime.upscaler.camera_jump`);
     - ``slabs``: K > 0 renders each frame in K depth slabs and accumulates them with the layered TAAU, one
-      history per slab (docs/temporal.md, "Layered history"); only for a base-filter model on TAAU (XS).
+      history per slab (docs/temporal.md, "Layered history"); only for a base-filter model on TAAU (XS);
+      0 runs the TAAU on the frame's colour; None (the default) the model's own
+      (:func:`~volsr_core.runtime.upscaler.default_slabs`: two for XS at 4x and more, else 0).
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
     rendering and upscaling that frame. :meth:`update` follows a changed volume, transfer function,
@@ -53,7 +55,7 @@ class Pipeline:
                  device: str = "cpu",
                  backend: str = "auto", fp16: bool = False, threads: int | None = None,
                  sample_distance: float | None = None, background: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 max_turn: float = 30.0, max_zoom: float = 2.0, slabs: int = 0):
+                 max_turn: float = 30.0, max_zoom: float = 2.0, slabs: int | None = None):
         if model is None:
             from volsr_core.runtime.models import DEFAULT_SCALE, default_variant, model_file
 

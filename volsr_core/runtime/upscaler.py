@@ -14,7 +14,7 @@ from volsr_core.render.features import FeatureFrame
 from volsr_core.runtime.base_filter import Scratch, filter_image
 from volsr_core.runtime.layout import to_channels_first, to_image_clipped
 from volsr_core.scene.camera import Camera, rotation_between
-from volsr_core.sr.history import HistoryFeed
+from volsr_core.sr.history import HistoryFeed, history_mode
 from volsr_core.temporal.layered import LayeredUpsampler
 from volsr_core.temporal.resample import upscale_bilinear
 from volsr_core.temporal.taau import view_rotation
@@ -48,6 +48,28 @@ def camera_jump(previous: Camera | None, camera: Camera, max_turn: float = 30.0,
     return ""
 
 
+LAYERED_SLABS = 2  # depth slabs of the layered TAAU where it is the default (docs/temporal.md, "Layered history")
+LAYERED_FROM_SCALE = 4  # the smallest scale it is the default at: at 2x TAAU's own history is the better one
+
+
+def takes_slabs(engine: Any) -> bool:
+    """Whether ``engine``'s model can refine the layered TAAU: a base filter run on the CPU (variant XS) whose
+    history is a TAAU estimate of colour alone (no side outputs)."""
+    config = engine.config
+    return (getattr(engine, "base_filter", None) is not None and history_mode(config) == "taau"
+            and not getattr(config, "taau_aux", False))
+
+
+def default_slabs(engine: Any) -> int:
+    """The depth slabs ``engine``'s model runs on when the caller names none: :data:`LAYERED_SLABS` where it can
+    refine the layered TAAU (:func:`takes_slabs`) at :data:`LAYERED_FROM_SCALE` or more, 0 (the TAAU) otherwise.
+
+    Measured (docs/performance.md, "the layered TAAU"): at 4x two slabs lift VolSR XS against the native + bilinear
+    curve on all four bench volumes at 512² and 1024² and four cost more render time than they give; at 8x two
+    lift TAAU by 0.9-1.1 dB; at 2x the layered history is below TAAU's."""
+    return LAYERED_SLABS if takes_slabs(engine) and engine.config.scale >= LAYERED_FROM_SCALE else 0
+
+
 class StatefulUpscaler:
     """Feeds an engine (:mod:`volsr_core.runtime.engines`) frame by frame, as a viewer renders them.
 
@@ -70,11 +92,12 @@ class StatefulUpscaler:
 
     ``slabs`` K > 0 (a base-filter model on TAAU only, variant XS) runs the layered TAAU
     (:class:`~volsr_core.temporal.layered.LayeredUpsampler`) on frames rendered in K depth slabs
-    (``RayCaster.render(..., slabs=K)``) instead of the TAAU on their colour, and the filter on its estimate.
+    (``RayCaster.render(..., slabs=K)``) instead of the TAAU on their colour, and the filter on its estimate;
+    0 runs the TAAU; None (the default) takes :func:`default_slabs` of the engine.
     """
 
     def __init__(self, engine: Any, max_motion: float = 0.25, max_offscreen: float = 0.5, max_turn: float = 30.0,
-                 max_zoom: float = 2.0, slabs: int = 0):
+                 max_zoom: float = 2.0, slabs: int | None = None):
         self.engine = engine
         self.config = engine.config
         self.max_motion, self.max_offscreen = float(max_motion), float(max_offscreen)
@@ -82,8 +105,10 @@ class StatefulUpscaler:
         self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=self.config.previous_frames + 1)
         self.history = HistoryFeed(self.config)
         self.base_filter = getattr(engine, "base_filter", None)  # variant XS on the CPU: no network inputs
-        self.slabs = int(slabs)
-        if self.slabs and (self.base_filter is None or self.history.mode != "taau" or self.history.taau_aux):
+        self.slabs = default_slabs(engine) if slabs is None else int(slabs)
+        if self.slabs < 0:
+            raise ValueError(f"depth slabs must be 0 or more, got {self.slabs}")
+        if self.slabs and not takes_slabs(engine):
             raise ValueError("depth slabs feed a layered TAAU, which only a base-filter model on TAAU (variant XS) "
                              "refines")
         self.layered = LayeredUpsampler(self.config.scale) if self.slabs else None

@@ -183,7 +183,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
             "scene": bench_volume.label, "volume": bench_volume.name, "preset": bench_volume.preset,
             "range": [float(v) for v in bench_volume.transfer_function.value_range],
             "method": method.kind, "label": method.label, "scale": method.scale, "spp": method.spp,
-            "variant": method.variant, "model": method.model,
+            "slabs": method.slabs, "variant": method.variant, "model": method.model,
             "ms_render": _finite(statistics.median(rec["render"])),
             "ms_network": _finite(statistics.median(rec["network"])),
             "ms_total": _finite(statistics.median(total)),
