@@ -18,7 +18,7 @@ import numpy as np
 from bench_taau import orbit_parser, orbit_scene
 
 from volsr_core.apps.bench.report import curve_psnr_at
-from volsr_core.runtime.methods import Method, Native, ReducedSize, Taau, VolSR
+from volsr_core.runtime.methods import Native, ReducedSize, Taau, VolSR
 from volsr_core.runtime.models import model_file, shipped_models
 from volsr_core.runtime.pipeline import Pipeline
 from volsr_core.sr.metrics import psnr_ssim
@@ -26,12 +26,6 @@ from volsr_core.temporal import render_supersampled
 
 WARMUP = 4
 FACTORS = (2, 3, 4, 6, 8)
-
-
-def name(method: Method) -> str:
-    """The method's label, a VolSR pipeline's slabs added."""
-    slabs = getattr(getattr(method, "pipeline", None), "slabs", 0)
-    return f"{method.label} in {slabs} slabs" if slabs else method.label
 
 
 def main() -> None:
@@ -51,22 +45,22 @@ def main() -> None:
                                     size=shape, threads=2, slabs=k), "XS")
                      for s in args.scales.split(",") if ("XS", int(s)) in shipped
                      for k in [0] + [int(k) for k in args.slabs.split(",")]]
-        scores: dict[str, list[float]] = {name(m): [] for m in curve + temporal}
-        ms: dict[str, list[tuple[float, float]]] = {name(m): [] for m in curve + temporal}
+        scores: dict[str, list[float]] = {m.label: [] for m in curve + temporal}
+        ms: dict[str, list[tuple[float, float]]] = {m.label: [] for m in curve + temporal}
         for t, camera in enumerate(cameras):
             for method in curve + temporal:
                 frame = method(camera)
                 if t >= WARMUP:
-                    scores[name(method)].append(psnr_ssim(frame.image, truth[t], channel_axis=-1)[0])
-                    ms[name(method)].append((frame.ms_render, frame.ms_upscale))
+                    scores[method.label].append(psnr_ssim(frame.image, truth[t], channel_axis=-1)[0])
+                    ms[method.label].append((frame.ms_render, frame.ms_upscale))
         psnr = {k: float(np.mean(v)) for k, v in scores.items()}
         total = {k: float(np.median([r + u for r, u in v])) for k, v in ms.items()}
-        curve_ms = [total[name(m)] for m in curve]
-        curve_db = [psnr[name(m)] for m in curve]
+        curve_ms = [total[m.label] for m in curve]
+        curve_db = [psnr[m.label] for m in curve]
         print(f"\n{scene.label}, {size}², {args.degrees:g}° per frame\n")
         print("| method | PSNR dB | render ms | upscale ms | total ms | vs curve dB |\n|---|---:|---:|---:|---:|---:|")
         for method in curve + temporal:
-            label = name(method)
+            label = method.label
             render, upscale = (float(np.median([p[i] for p in ms[label]])) for i in (0, 1))
             gap = "" if method in curve else f"{psnr[label] - curve_psnr_at(curve_ms, curve_db, total[label]):+.2f}"
             print(f"| {label} | {psnr[label]:.2f} | {render:.1f} | {upscale:.1f} | {total[label]:.1f} | {gap} |",

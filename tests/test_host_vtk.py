@@ -239,3 +239,22 @@ def test_without_a_model_the_adapter_draws_with_the_default_volsr_xs_2x(ct_avm):
     expected = Pipeline(volume, tf, size=(W, H)).render(adapter.last_camera)
     assert psnr(adapter.last_image, expected) > 60, "the same model, camera and jitter: the same frame"
     host.close()
+
+
+def test_xs_at_4x_draws_in_two_depth_slabs_unless_the_host_says_none(ct_avm):
+    """At --scale 4 the shipped XS runs on the layered TAAU (two depth slabs) in the host as in a Pipeline with
+    the same defaults; ``slabs=0`` gives the TAAU on the frame's colour."""
+    from volsr_core.hosts.vtk_adapter import VolSRPostProcess
+
+    volume, tf = ct_avm
+    host = scene(volume, tf)
+    for slabs, rendered in ((None, 2), (0, 0)):
+        adapter = VolSRPostProcess(host.renderer, host.actor, volume, scale=4, slabs=slabs)
+        host.window.Render()
+        assert adapter.pipeline.slabs == rendered and adapter.last_error == ""
+        lr = adapter.pipeline.last_low_resolution
+        assert (0 if lr.slabs is None else lr.slabs.shape[0]) == rendered
+        expected = Pipeline(volume, tf, scale=4, size=(W, H), slabs=slabs).render(adapter.last_camera)
+        assert psnr(adapter.last_image, expected) > 60, "the same model, slabs, camera and jitter: the same frame"
+        adapter.detach()
+    host.close()

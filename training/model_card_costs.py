@@ -25,7 +25,8 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
     lines = [SECTION, "",
              "Medians over the measured frames of `volsr bench` (ONNX Runtime, CPU, 2 threads, or for variant XS its "
              "numba filter kernel, on the project's "
-             "2-core machine; the LR render is the ray caster's). \"vs curve\": PSNR minus that of native "
+             "2-core machine; the LR render is the ray caster's; \"K slabs\": rendered in K depth slabs, the layered "
+             "TAAU before the model). \"vs curve\": PSNR minus that of native "
              "rendering at reduced size + bilinear at the same total time (positive: the model pays off).", "",
              "| run | volume | LR render ms | TAAU + network ms | total ms | PSNR dB | vs curve dB | native 1 spp |",
              "|---|---|---:|---:|---:|---:|---:|---|"]
@@ -41,7 +42,8 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
                 continue
             points = bench["targets"][scene]["above_bilinear"]["points"]
             margin = next(p["margin_db"] for p in points if p["label"] == mine["label"])
-            lines.append(f"| {run} | {mine['volume']} | {mine['ms_render']:.1f} | {mine['ms_network']:.1f} | "
+            slabs = mine.get("slabs", 0)  # runs before the slabs were recorded had none
+            lines.append(f"| {run}{f', {slabs} slabs' if slabs else ''} | {mine['volume']} | {mine['ms_render']:.1f} | {mine['ms_network']:.1f} | "
                          f"{mine['ms_total']:.1f} | {mine['psnr']:.2f} | {margin:+.2f} | "
                          f"{native['psnr']:.2f} dB in {native['ms_total']:.1f} ms |")
     sources = ", ".join(f"`{p.resolve().relative_to(REPO).as_posix()}`" for p in bench_paths)
