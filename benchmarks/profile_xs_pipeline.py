@@ -1,5 +1,5 @@
 """Where VolSR XS's time after the LR render goes inside a ``Pipeline``: median ms per frame of the whole step and
-of its kernels (TAAU's prepass and kernel, the filter).
+of its kernels (TAAU's prepass and kernel, or at 4x and more the layered TAAU's, and the filter).
 
     python benchmarks/profile_xs_pipeline.py [--volume MR_Gd.nii.gz:MR-Default] [--size 1024] [--scale 2]
                                              [--frames 24]
@@ -17,6 +17,7 @@ from typing import Callable
 from bench_taau import orbit_parser, orbit_scene
 
 import volsr_core.runtime.upscaler as upscaler
+import volsr_core.temporal.layered as layered
 import volsr_core.temporal.taau as taau
 from volsr_core.runtime.pipeline import Pipeline
 
@@ -24,13 +25,14 @@ WARMUP = 4
 
 
 def timed(module, name: str, times: dict[str, list[float]]) -> None:
-    """Replace ``module.name`` by a wrapper that appends each call's ms to ``times[name]``."""
+    """Replace ``module.name`` by a wrapper that appends each call's ms to ``times["module.name"]``."""
     function: Callable = getattr(module, name)
+    key = f"{module.__name__.rsplit('.', 1)[-1]}.{name}"
 
     def wrapper(*args, **kwargs):
         started = time.perf_counter()
         result = function(*args, **kwargs)
-        times.setdefault(name, []).append(1000.0 * (time.perf_counter() - started))
+        times.setdefault(key, []).append(1000.0 * (time.perf_counter() - started))
         return result
 
     setattr(module, name, wrapper)
@@ -44,16 +46,19 @@ def main() -> None:
     args = parser.parse_args()
     scene, _, cameras = orbit_scene(args)
     times: dict[str, list[float]] = {}
-    for module, name in ((taau, "_prepass"), (taau, "_kernel"), (upscaler, "filter_image")):
+    for module, name in ((taau, "_prepass"), (taau, "_kernel"), (layered, "_prepass"), (layered, "_kernel"),
+                         (upscaler, "filter_image")):
         timed(module, name, times)
     pipeline = Pipeline(scene.volume, scene.transfer_function, scale=args.scale, variant="XS",
                         size=(args.size, args.size), threads=2)
-    step = []
+    step, render = [], []
     for camera in cameras:
         pipeline.render(camera)
         step.append(pipeline.last_timings["network_ms"])
+        render.append(pipeline.last_timings["render_ms"])
     after = statistics.median(step[WARMUP:])
-    print(f"{scene.label}, {args.size}², XS {args.scale}x: after the LR render {after:.2f} ms"
+    print(f"{scene.label}, {args.size}², XS {args.scale}x in {pipeline.slabs} slabs: LR render "
+          f"{statistics.median(render[WARMUP:]):.2f} ms, after it {after:.2f} ms"
           + "".join(f", {name} {statistics.median(ms[WARMUP:]):.2f}" for name, ms in times.items()))
 
 

@@ -168,6 +168,18 @@ def test_xs_at_4x_and_more_runs_in_two_depth_slabs_unless_told_otherwise(tmp_pat
         Pipeline(volume, get_preset("CT-Phantom"), scale=4, slabs=-1)
 
 
+def test_an_output_clipped_in_the_kernel_equals_the_output_clipped_after_it():
+    """``clip_output``: the one pass that writes the image clips it, as np.clip after it would (one filter and a pair,
+    weights that overshoot [0, 1])."""
+    rng = np.random.default_rng(7)
+    image = rng.random((23, 19, 3), dtype=np.float32)
+    weights, bias = rng.normal(0, 0.4, (2, 3, 5, 5)).astype(np.float32), rng.normal(0, 0.3, (2, 3)).astype(np.float32)
+    for n in (1, 2):
+        plain = filter_image(image, weights[:n], bias[:n])
+        assert plain.min() < 0.0 and plain.max() > 1.0, "the weights must overshoot for the test to mean something"
+        assert np.array_equal(filter_image(image, weights[:n], bias[:n], clip_output=True), np.clip(plain, 0.0, 1.0))
+
+
 def test_work_buffers_kept_between_frames_change_no_result():
     rng = np.random.default_rng(5)
     weights, bias = rng.normal(0, 0.2, (2, 3, 5, 5)).astype(np.float32), rng.normal(0, 0.1, (2, 3)).astype(np.float32)

@@ -201,5 +201,4 @@ class StatefulUpscaler:
                                 frame.pixels_per_voxel)
         if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale
             base = upscale_bilinear(colour, self.config.scale)
-        out = filter_image(base, *self.base_filter, scratch=self._scratch)
-        return np.clip(out, 0.0, 1.0, out=out)
+        return filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True)
