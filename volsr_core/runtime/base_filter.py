@@ -8,8 +8,9 @@ on images laid out as TAAU makes them, so the upscaler needs no network inputs a
 it: one pass lays the clipped, padded channels apart, a second sums each tap over whole rows (the
 loops vectorise; a pair sums both filters in the same pass and blends) and interleaves the result;
 work buffers stay in a :class:`Scratch` between frames. On TAAU's 512² estimates (2 cores, medians,
-``benchmarks/bench_base_filter.py``): 1.7 ms for the 5x5 pair of XS 2x, 2.1 ms for the 9x9 filter of
-XS 4x, where onnxruntime's depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9) without its transposes. The
+``benchmarks/bench_base_filter.py``): 1.6 ms for the 5x5 pair of XS 2x and for the 9x9 filter of XS 4x
+(docs/network.md), where onnxruntime's depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9), on a faster
+machine, without its transposes. The
 weights travel in the ONNX file's metadata (:data:`FILTER_KEY`, written by :func:`~volsr_core.runtime.export.
 export_onnx`); the graph stays the reference the kernel is tested against.
 """
