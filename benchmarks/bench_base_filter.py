@@ -7,7 +7,8 @@ earlier commit's.
 For each output size and scale the LR frames are rendered as ``bench_taau.py`` renders them and run through
 ``TemporalUpsampler`` once; the TAAU estimates after the first two frames are the inputs. Each goes through
 :func:`~volsr_core.runtime.base_filter.filter_image` with the shipped XS model's weights at that scale (a 5x5
-pair at 2x, one 9x9 filter at 4x), each kernel keeping its :class:`Scratch` as the upscaler does. With
+pair at 2x, one 5x5 filter at 4x: 9x9 until 2026-11-25), each kernel keeping its :class:`Scratch` as the
+upscaler does. With
 ``--against COMMIT`` the ``volsr_core/runtime/base_filter.py`` of that commit runs too, interleaved call by call
 with the current one; the table gives the median ms per call of each, their ratio and the largest difference
 between their outputs.

@@ -62,3 +62,15 @@ def tiny_sequences(tmp_path_factory) -> Path:
     (folder / "tiny.yaml").write_text(TINY_SEQUENCES)
     generate(read_config(folder / "tiny.yaml"), folder / "set", log=lambda text: None, progress=False)
     return folder / "set"
+
+
+@pytest.fixture(scope="session")
+def tiny_layered_sequences(tmp_path_factory) -> Path:
+    """:func:`tiny_sequences` with each LR frame also in two depth slabs (``slabs: 2``), for the layered TAAU."""
+    from volsr_core.dataset.config import read_config
+    from volsr_core.dataset.videos import generate
+
+    folder = tmp_path_factory.mktemp("tiny_layered_sequences")
+    (folder / "tiny.yaml").write_text(TINY_SEQUENCES + "slabs: 2\n")
+    generate(read_config(folder / "tiny.yaml"), folder / "set", log=lambda text: None, progress=False)
+    return folder / "set"

@@ -145,13 +145,15 @@ def test_an_xs_pipeline_in_depth_slabs_filters_the_layered_taau_estimate(tmp_pat
 
 
 def test_xs_at_4x_and_more_runs_in_two_depth_slabs_unless_told_otherwise(tmp_path):
-    """The default slabs (None): two for XS on TAAU at 4x and 8x, none for XS 2x, XS on the bilinear upscale or a
-    U-Net model; slabs=0 gives the TAAU on the frame's colour; a negative count is refused."""
+    """The default slabs (None): those an XS model was fitted on (``taau_slabs``, read from the ONNX file), else two
+    for XS on TAAU at 4x and 8x, none for XS 2x, XS on the bilinear upscale or a U-Net model; slabs=0 gives the
+    TAAU on the frame's colour; a negative count is refused."""
     from volsr_core.runtime.engines import open_engine
     from volsr_core.runtime.upscaler import default_slabs
 
     cases = {"xs4": (variant_config("XS", 4, taau_base=True), 2), "xs8": (variant_config("XS", 8, taau_base=True), 2),
              "xs2": (variant_config("XS", 2, taau_base=True), 0),
+             "xs2fitted3": (variant_config("XS", 2, taau_base=True, taau_slabs=3), 3),  # the slabs it was fitted on
              "xs4bilinear": (variant_config("XS", 4), 0),
              "s4": (variant_config("S", 4, taau_base=True), 0)}
     for name, (config, slabs) in cases.items():
@@ -272,3 +274,58 @@ def test_volsr_train_fits_an_xs_model_no_worse_than_the_identity_on_its_training
             errors["identity"] += float(torch.sum((base - item["hr"]) ** 2))
             errors["fitted"] += float(torch.sum((fitted.base_filter(base[None])[0] - item["hr"]) ** 2))
     assert errors["fitted"] <= errors["identity"] * (1 + 1e-4)
+
+
+def test_volsr_train_fits_xs_on_the_layered_taau_and_without_a_bias_black_stays_black(tiny_layered_sequences,
+                                                                                      tiny_sequences, tmp_path):
+    """A config with ``taau_slabs`` fits the filter on the layered TAAU's estimate of the dataset's depth slabs (the
+    loader's base is that estimate, and the fit beats the identity on it); ``fit_bias: false`` keeps the bias 0;
+    ``volsr eval`` scores the layered TAAU beside VolSR; a dataset without slabs is a one-line error naming its
+    store."""
+    import h5py
+
+    from volsr_core.apps.evaluate import evaluate
+    from volsr_core.cli import main
+    from volsr_core.dataset.store import frame_pixels_per_voxel, view_rotations
+    from volsr_core.sr.checkpoint import load_model
+    from volsr_core.sr.least_squares import item_inputs
+    from volsr_core.sr.loader import SequenceDataset
+    from volsr_core.temporal.layered import LayeredUpsampler
+
+    config = {"seed": 0, "out": str(tmp_path / "run"),
+              "data": {"root": str(tiny_layered_sequences), "scale": 4, "previous_frames": 0},
+              "model": {"variant": "XS", "taau_base": True, "taau_slabs": 2, "base_kernel": 5}, "optim": {},
+              "train": {"fit_bias": False}, "loss": {}}
+    (tmp_path / "xs.yaml").write_text(yaml.safe_dump(config))
+    assert main(["train", str(tmp_path / "xs.yaml")]) == 0
+    fitted = load_model(Path(tmp_path / "run" / "best.pt")).eval()
+    assert (fitted.config.taau_slabs, fitted.config.base_kernel) == (2, 5)
+    assert torch.count_nonzero(fitted.base_filter.conv.bias) == 0
+    assert torch.count_nonzero(fitted.base_filter.conv.weight) == fitted.base_filter.conv.weight.numel()
+    frames = SequenceDataset(tiny_layered_sequences, "train", 4, 0, None, augment=False, taau=fitted.config)
+    video = frames.videos[0]
+    with h5py.File(tiny_layered_sequences / video["file"], "r") as h5:
+        slabs, jitter, turns = h5["lr4/slabs"][()], h5["lr4/jitter"][()], view_rotations(h5["cameras"][()])
+    fineness = frame_pixels_per_voxel(video, slabs.shape[2])
+    layered = LayeredUpsampler(4)  # told the pixels per voxel, as the upscaler tells it
+    estimates = [layered(slabs[t], tuple(jitter[t]), rotation=turns[t], pixels_per_voxel=fineness[t])
+                 for t in range(len(slabs))]
+    errors = {"fitted": 0.0, "identity": 0.0}
+    with torch.no_grad():
+        for i, (_, t) in enumerate(frames.samples):
+            item = frames[i]
+            lr, history = item_inputs(item)
+            base = fitted.unfiltered_base(lr, history)[0]
+            if i < len(estimates):  # the first video: the loader's base is the layered TAAU's estimate (float16)
+                expected = np.clip(estimates[t], 0, 1).transpose(2, 0, 1)
+                assert np.abs(base.numpy() - expected).max() < 2e-3
+            errors["identity"] += float(torch.sum((base - item["hr"]) ** 2))
+            errors["fitted"] += float(torch.sum((fitted.base_filter(base[None])[0] - item["hr"]) ** 2))
+    assert errors["fitted"] <= errors["identity"] * (1 + 1e-4)
+    results, _ = evaluate(fitted, tiny_layered_sequences, "test", progress=False)
+    assert results["methods"] == ["bilinear", "bilinear, jittered", "bicubic, jittered", "TAAU", "layered TAAU",
+                                  "VolSR"]
+    assert results["overall"]["layered TAAU"]["psnr"] != results["overall"]["TAAU"]["psnr"]
+    with pytest.raises(InputError, match=r"v000\d\.h5: holds 0 depth slabs at 4x \(lr4/slabs\), the network refines "
+                                         r"the layered TAAU of 2: make the dataset with `slabs: 2`"):
+        SequenceDataset(tiny_sequences, "train", 4, 0, None, augment=False, taau=fitted.config)

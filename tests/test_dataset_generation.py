@@ -358,3 +358,47 @@ volumes:
     with pytest.raises(Exception, match="min_orbit_speed, max_orbit_speed: needs low <= high"):
         read_config(path)
 
+
+
+SLAB_VIDEO = """\
+seed: 5
+hr_size: 32
+scales: [4]
+frames_per_video: 3
+previous_frames: 0
+ground_truth: {mode: supersampled, spp: 2}
+camera: {pool_size: 4, distance_range: [0.35, 0.45]}
+volumes:
+  - {name: phantom, path: phantom, phantom_shape: [40, 40, 40], transfer_function: {preset: CT-Phantom}, videos: 1,
+     split: train}
+"""
+
+
+def test_depth_slabs_are_stored_beside_the_buffers_a_dataset_without_them_holds(tmp_path):
+    """``slabs: K`` adds each scale's K depth slabs, which composite to the frame's colour, and leaves every other
+    array (and the fingerprint of a config without it) as it was."""
+    from volsr_core.render.layout import SLAB_CHANNELS, SLAB_RGBA
+
+    stores = {}
+    for k in (0, 2):
+        (tmp_path / f"k{k}.yaml").write_text(SLAB_VIDEO + (f"slabs: {k}\n" if k else ""))
+        config = read_config(tmp_path / f"k{k}.yaml")
+        assert config.slabs == k
+        generate(config, tmp_path / f"set{k}", log=lambda text: None, progress=False)
+        stores[k] = h5py.File(tmp_path / f"set{k}" / "videos" / "v0000.h5", "r")
+    assert set(stores[2]) == set(stores[0]) and set(stores[2]["lr4"]) == set(stores[0]["lr4"]) | {"slabs"}
+    for name in stores[0]["lr4"]:
+        assert np.array_equal(stores[2]["lr4"][name][()], stores[0]["lr4"][name][()]), name
+    assert np.array_equal(stores[2]["hr/color"][()], stores[0]["hr/color"][()])
+    slabs = stores[2]["lr4/slabs"][()]
+    assert slabs.shape == (3, 2, 8, 8, SLAB_CHANNELS) and slabs.dtype == np.float32
+    rgba = slabs[..., SLAB_RGBA:SLAB_RGBA + 4]
+    composite = rgba[:, 0, ..., :3] + (1.0 - rgba[:, 0, ..., 3:]) * rgba[:, 1, ..., :3]  # front to back, over black
+    colour = stores[0]["lr4/color"][()].astype(np.float32)
+    assert colour.max() > 0.2 and np.abs(composite - colour).max() < 0.02  # rays past early termination: a little more
+    assert all(s.any() for s in rgba[..., 3].max(axis=(0, 2, 3)) > 0.05)  # both slabs show something
+    assert json.loads((tmp_path / "set2" / "manifest.json").read_text())["config"]["slabs"] == 2
+    validate_manifest(tmp_path / "set2" / "manifest.json")
+    (tmp_path / "k0b.yaml").write_text(SLAB_VIDEO + "slabs: 0\n")
+    fingerprints = [read_config(tmp_path / f"{name}.yaml").fingerprint(0, 0) for name in ("k0", "k0b", "k2")]
+    assert fingerprints[0] == fingerprints[1] != fingerprints[2]

@@ -20,6 +20,9 @@ LIMIT_BYTES = 10 * 1024 * 1024
 RISK = "the network invents plausible detail that was not rendered"
 RISK_XS = ("the filter sharpens what TAAU made (it invents no structure, but it can ring along edges and lift "
            "noise)")
+TAAU_BASED = "TAAU-based (refines the TAAU estimate of each frame; the upscaler runs TAAU before it), "
+LAYERED = ("on the layered TAAU (refines its estimate of each frame rendered in {} depth slabs, one history per slab; "
+           "the upscaler runs it before), ")
 
 
 def metrics_table(path: Path) -> list[str]:
@@ -59,7 +62,7 @@ def main() -> None:
     cfg = model.config
     entry = {"name": args.name, "variant": args.variant, "scale": cfg.scale, "previous_frames": cfg.previous_frames,
              "recurrent": cfg.recurrent, "taau_base": cfg.taau_base, "taau_aux": cfg.taau_aux,
-             "features": list(cfg.features),
+             **({"taau_slabs": cfg.taau_slabs} if cfg.taau_slabs else {}), "features": list(cfg.features),
              "files": {"pt": pt.name, "onnx": onnx_path.name, "card": f"{args.name}.md"},
              "sha256": {"pt": file_sha256(pt), "onnx": file_sha256(onnx_path)},
              "parameters": sum(p.numel() for p in model.parameters())}
@@ -72,7 +75,7 @@ def main() -> None:
         fh.write("\n")
     card = [f"# Model card: {args.name}", "",
             f"VolSR variant {args.variant}, {cfg.scale}x per axis, {'recurrent, ' if cfg.recurrent else ''}"
-            f"{'TAAU-based (refines the TAAU estimate of each frame; the upscaler runs TAAU before it), ' if cfg.taau_base else ''}"
+            f"{LAYERED.format(cfg.taau_slabs) if cfg.taau_slabs else TAAU_BASED if cfg.taau_base else ''}"
             f"{'seeing what TAAU threw away (the reprojected history and its share of the blend), ' if cfg.taau_aux else ''}"
             f"{'its TAAU told how finely frames sample the volume, ' if cfg.taau_fine_sampling else ''}"
             f"{cfg.previous_frames} previous frames, inputs {', '.join(cfg.features)}; "

@@ -2,7 +2,8 @@
 
 The methods (``results["methods"]``, in :data:`METHODS` order): "bilinear" (the unjittered LR
 render upscaled, what VTK shows; version-2 stores only), the jittered LR frame upscaled bilinearly
-and bicubically, TAAU and VolSR. Per video and frame t >= N (the frames the network can see N
+and bicubically, TAAU, for a network on the layered TAAU (``taau_slabs``) that TAAU's estimate
+("layered TAAU", its base) and VolSR. Per video and frame t >= N (the frames the network can see N
 previous frames for): PSNR and SSIM from scikit-image against the HR ground truth, and a temporal-stability error: the mean
 absolute difference between the output's and the ground truth's frame-to-frame change after
 backward-warping frame t-1 onto t with the (upsampled) motion vectors, over pixels whose
@@ -28,13 +29,14 @@ from volsr_core.atomic import atomic_write
 from volsr_core.dataset.store import frame_pixels_per_voxel, view_rotations
 from volsr_core.runtime.methods import ReducedSize, Taau
 from volsr_core.sr.history import HistoryFeed
-from volsr_core.sr.loader import SequenceDataset
+from volsr_core.sr.loader import SequenceDataset, slabs_mismatch
 from volsr_core.sr.metrics import psnr_ssim
 from volsr_core.sr.network import SuperResolutionNet
 from volsr_core.temporal.resample import upscale_bilinear
 from volsr_core.temporal.warp import backward_warp
 
-METHODS = ("bilinear", "bilinear, jittered", "bicubic, jittered", "TAAU", "VolSR")  # "bilinear": version-2 stores
+# "bilinear": version-2 stores; "layered TAAU": the base of a network with taau_slabs
+METHODS = ("bilinear", "bilinear, jittered", "bicubic, jittered", "TAAU", "layered TAAU", "VolSR")
 
 
 def temporal_error(out_prev: np.ndarray, out: np.ndarray, gt_prev: np.ndarray, gt: np.ndarray,
@@ -48,8 +50,8 @@ def temporal_error(out_prev: np.ndarray, out: np.ndarray, gt_prev: np.ndarray, g
 
 class VideoFrames:
     """One video's LR frames at one scale (jittered colour, motion, jitter, motion depth, and the unjittered
-    ``centred`` colour when the store has it: version 2), view rotations, pixels per voxel (None unless the
-    JSON ``entry`` records ``voxel_size``) and HR ground truth, from its store."""
+    ``centred`` colour when the store has it: version 2; the depth slabs when it has them), view rotations,
+    pixels per voxel (None unless the JSON ``entry`` records ``voxel_size``) and HR ground truth, from its store."""
 
     def __init__(self, path: Path, scale: int, entry: dict[str, Any] | None = None):
         with h5py.File(path, "r") as h5:
@@ -59,6 +61,7 @@ class VideoFrames:
             depth = f"lr{scale}/motion_depth" if f"lr{scale}/motion_depth" in h5 else f"lr{scale}/depth"
             self.depth = h5[depth][()].astype(np.float32)
             self.centred = h5[f"lr{scale}/centred"][()].astype(np.float32) if f"lr{scale}/centred" in h5 else None
+            self.slabs = h5[f"lr{scale}/slabs"][()].astype(np.float32) if f"lr{scale}/slabs" in h5 else None
             self.rotation = view_rotations(h5["cameras"][()])
             self.hr = h5["hr/color"][()].astype(np.float32)
         self.pixels_per_voxel = (frame_pixels_per_voxel(entry, self.lr.shape[1]) if entry is not None
@@ -114,12 +117,18 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
     for video_index, indices in iterator:
         meta = data.videos[video_index]
         frames = VideoFrames(data.root / meta["file"], cfg.scale, meta)
+        have = 0 if frames.slabs is None else frames.slabs.shape[1]
+        if cfg.taau_slabs and have != cfg.taau_slabs:
+            raise slabs_mismatch(data.root / meta["file"], have, cfg.taau_slabs, cfg.scale)
         methods = _baselines(frames, cfg.scale)
         network_out: dict[int, np.ndarray] = {}
         feed = HistoryFeed(cfg)
         samples = {data.samples[index][1]: index for index in indices}  # frame t -> sample
+        layered: dict[int, np.ndarray] = {}
         for t in range(len(frames.lr)):
-            history = feed(*frames.taau_inputs(t))
+            history = feed(*frames.taau_inputs(t), slabs=None if frames.slabs is None else frames.slabs[t])
+            if feed.slabs:
+                layered[t] = np.clip(history, 0.0, 1.0)
             if t not in samples:  # before frame N: only the history follows the video
                 continue
             item = data[samples[t]]
@@ -133,6 +142,8 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
             network_out[t] = np.clip(out[0].permute(1, 2, 0).numpy(), 0.0, 1.0)
             feed.keep(out[0].permute(1, 2, 0).numpy())
         methods["VolSR"] = network_out.__getitem__
+        if layered:
+            methods["layered TAAU"] = layered.__getitem__
         names = [name for name in METHODS if name in methods and all(name in v for v in results["videos"].values())]
         results["methods"] = names
         ts = sorted(network_out)

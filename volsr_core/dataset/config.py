@@ -75,13 +75,14 @@ class DatasetConfig:
     pool: dict[str, Any]
     path: dict[str, Any]
     volumes: tuple[VolumeSpec, ...]
+    slabs: int = 0  # LR frames also cut into this many depth slabs (RayCaster.render(..., slabs=K)); 0: none
 
     def to_dict(self) -> dict[str, Any]:
         """The config as read, defaults filled in and paths resolved (the manifest's ``config``)."""
         return {"seed": self.seed, "hr_size": list(self.hr_size), "scales": list(self.scales),
                 "frames_per_video": self.frames_per_video, "previous_frames": self.previous_frames,
                 "ground_truth": dict(self.ground_truth), "camera": {**self.pool, **self.path},
-                "volumes": [v.to_dict() for v in self.volumes]}
+                "volumes": [v.to_dict() for v in self.volumes], "slabs": self.slabs}
 
     def fingerprint(self, volume_index: int, video_index: int) -> str:
         """SHA-256 of everything that decides one video's store: the common settings, its volume's
@@ -94,6 +95,8 @@ class DatasetConfig:
                "volume": {"name": spec.name, "path": spec.path, "phantom_shape": spec.phantom_shape,
                           "transfer_function": spec.tf_definition, "range": spec.transfer_function["range"]},
                "volume_index": volume_index, "video_index": video_index, "store_version": STORE_VERSION}
+        if self.slabs:  # only where set, so that the videos of datasets made before slabs existed stay current
+            key["slabs"] = self.slabs
         return "sha256:" + hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
 
 
@@ -159,6 +162,7 @@ class _Document:
     ground_truth: _GroundTruth
     camera: _Camera
     volumes: tuple[_VolumeEntry, ...]
+    slabs: int = setting(0, low=0, high=8)
 
 
 def read_config(path: str | os.PathLike) -> DatasetConfig:
@@ -173,7 +177,7 @@ def read_config(path: str | os.PathLike) -> DatasetConfig:
     return DatasetConfig(file=file.resolve(), seed=doc.seed, hr_size=_hr_size(file, doc.hr_size, scales),
                          scales=scales, frames_per_video=doc.frames_per_video, previous_frames=doc.previous_frames,
                          ground_truth=asdict(doc.ground_truth), pool=pool, path=motion,
-                         volumes=_volumes(file, doc.volumes))
+                         volumes=_volumes(file, doc.volumes), slabs=doc.slabs)
 
 
 def _scales(file: Path, scales: tuple[int, ...]) -> tuple[int, ...]:

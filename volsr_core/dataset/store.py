@@ -22,6 +22,7 @@ import numpy as np
 
 from volsr_core.atomic import atomic_write
 from volsr_core.errors import InputError, write_error
+from volsr_core.render.layout import SLAB_CHANNELS
 
 STORE_FORMAT = "volsr-video"
 MANIFEST_FORMAT = "volsr-dataset"
@@ -34,8 +35,11 @@ IMAGE_DTYPE = np.dtype(np.float16)
 VECTOR_DTYPE = np.dtype(np.float32)
 
 
-def store_layout(frames: int, hr_size: tuple[int, int], scales: tuple[int, ...]) -> dict[str, tuple[tuple, np.dtype]]:
-    """Every dataset of a video store: name -> (shape, dtype). ``hr_size`` is (width, height)."""
+def store_layout(frames: int, hr_size: tuple[int, int], scales: tuple[int, ...],
+                 slabs: int = 0) -> dict[str, tuple[tuple, np.dtype]]:
+    """Every dataset of a video store: name -> (shape, dtype). ``hr_size`` is (width, height); ``slabs`` K > 0
+    adds each scale's depth slabs (``lr{s}/slabs``, (frames, K, h, w, SLAB_CHANNELS): premultiplied RGBA and
+    motion in LR pixels, :attr:`~volsr_core.render.features.FeatureFrame.slabs`)."""
     width, height = hr_size
     layout: dict[str, tuple[tuple, np.dtype]] = {"hr/color": ((frames, height, width, 3), IMAGE_DTYPE)}
     for s in scales:
@@ -45,6 +49,8 @@ def store_layout(frames: int, hr_size: tuple[int, int], scales: tuple[int, ...])
         layout[f"lr{s}/centred"] = ((frames, h, w, 3), IMAGE_DTYPE)  # unjittered colour: the reduced-size render
         layout[f"lr{s}/motion"] = ((frames, h, w, 2), VECTOR_DTYPE)
         layout[f"lr{s}/jitter"] = ((frames, 2), VECTOR_DTYPE)
+        if slabs:
+            layout[f"lr{s}/slabs"] = ((frames, slabs, h, w, SLAB_CHANNELS), VECTOR_DTYPE)
     layout["cameras"] = ((frames, CAMERA_COLUMNS), np.dtype(np.float64))
     return layout
 

@@ -10,7 +10,9 @@
 - Per frame t: the HR ground truth (:func:`ground_truth_frames`), and per scale s one LR render
   without anti-aliasing, jittered by ``halton_jitter(t, ceil(8 s^2))`` (FSR2's phase count),
   with the previous frame's camera so that the motion vectors point to frame t-1 (zero at t=0),
-  plus the unjittered LR colour (``centred``: what a reduced-size render shows, for the baselines).
+  plus the unjittered LR colour (``centred``: what a reduced-size render shows, for the baselines)
+  and, with ``slabs`` K > 0, the same jittered frame cut into K depth slabs (``lr{s}/slabs``, what the
+  layered TAAU accumulates) in a pass of its own, so that the other buffers are those of a dataset without.
   Ray starts are jittered per pixel (interleaved gradient noise) with the frame number as seed, and
   per ground-truth sample.
 - A video's store is written frame by frame to ``.vNNNN.h5.part`` and renamed when whole; then
@@ -188,6 +190,10 @@ def render_frames(config: DatasetConfig, source: DatasetVolume, cameras: list[Ca
                           f"lr{s}/max_rgba": lr.max_rgba, f"lr{s}/motion_depth": lr.motion_depth,
                           f"lr{s}/centred": centred, f"lr{s}/motion": lr.motion,
                           f"lr{s}/jitter": np.asarray(jitter, dtype=np.float32)})
+            if config.slabs:  # a pass of its own: with slabs, rays go on past early termination (other colours)
+                frame[f"lr{s}/slabs"] = source.caster.render(
+                    camera, width // s, height // s, jitter=jitter, previous_camera=cameras[t - 1] if t else None,
+                    seed=t, slabs=config.slabs).slabs
         yield frame
 
 
@@ -195,7 +201,7 @@ def write_video(config: DatasetConfig, source: DatasetVolume, plan: VideoPlan, o
                 on_frame: Callable[[int], Any] = lambda n: None) -> dict[str, Any]:
     """Render one video into ``out/videos``: the store (via ``.part``), then its JSON entry; returns the entry."""
     cameras = camera_path(config, source, plan)
-    layout = store_layout(config.frames_per_video, config.hr_size, config.scales)
+    layout = store_layout(config.frames_per_video, config.hr_size, config.scales, config.slabs)
     attrs = {"video": plan.id, "volume": source.name, "format": STORE_FORMAT, "version": VERSION}
     with StoreWriter(out / plan.file, layout, attrs) as writer:
         for frame in render_frames(config, source, cameras):
@@ -287,7 +293,7 @@ class Measurement:
 def measure(config: DatasetConfig, source: DatasetVolume, cameras: list[Camera]) -> Measurement:
     """Render the first two frames of ``cameras`` as the generator does, timing each."""
     source.caster.render(cameras[0], 8, 8)  # compile (or load) the renderer outside the timing
-    layout = store_layout(1, config.hr_size, config.scales)
+    layout = store_layout(1, config.hr_size, config.scales, config.slabs)
     seconds, ratio = [], 1.0
     start = time.perf_counter()
     for frame in render_frames(config, source, cameras[:2]):
@@ -310,7 +316,7 @@ def _compression(layout: dict[str, tuple[tuple, np.dtype]], frame: dict[str, np.
 def check_free_space(out: Path, config: DatasetConfig, todo: list[VideoPlan], measured: Measurement) -> None:
     """OutputError naming ``out`` when its file system has less free space than the videos to render are
     expected to take (gzip-compressed, as :func:`measure` found on one frame)."""
-    need = len(todo) * raw_bytes(store_layout(config.frames_per_video, config.hr_size, config.scales))
+    need = len(todo) * raw_bytes(store_layout(config.frames_per_video, config.hr_size, config.scales, config.slabs))
     need *= measured.compression
     free = shutil.disk_usage(out).free
     if need > free:
@@ -343,7 +349,7 @@ def plan_text(config: DatasetConfig, plans: list[VideoPlan], mine: list[VideoPla
              f"{len(todo)} to render ({len(todo) * frames} frames)",
              f"  HR {width}x{height} ({gt['mode']}, {gt['spp']} spp); LR {lr}"]
     if measured is not None:
-        raw = len(todo) * raw_bytes(store_layout(frames, config.hr_size, config.scales))
+        raw = len(todo) * raw_bytes(store_layout(frames, config.hr_size, config.scales, config.slabs))
         lines += [f"  disk: {_size(raw)} of raw arrays, about {_size(raw * measured.compression)} gzip-compressed "
                   f"(ratio {measured.compression:.2f} measured on one frame)",
                   f"  time: about {_duration(len(todo) * measured.video_seconds(frames))} on {device} "

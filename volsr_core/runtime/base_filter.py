@@ -9,10 +9,10 @@ it: one pass lays the clipped, padded channels apart, a second sums each pixel's
 tap count compiled in, so the taps unroll and the pixels vectorise; a pair sums both filters in the same
 pass and blends) and interleaves the result; work buffers stay in a :class:`Scratch` between frames. On
 TAAU's 512² estimates (2 cores, medians, ``benchmarks/bench_base_filter.py``): 1.6 ms for the 5x5 pair of XS
-2x and for the 9x9 filter of XS 4x (docs/network.md), where onnxruntime's depthwise Conv took 2.4 (5x5) and
-10.8 ms (9x9), on a faster machine, without its transposes. The weights travel in the ONNX file's metadata
-(:data:`FILTER_KEY`, written by :func:`~volsr_core.runtime.export.export_onnx`); the graph stays the reference
-the kernel is tested against.
+2x and for a 9x9 filter (XS 4x's until 2026-11-25, now 5x5: 1.1 ms; docs/network.md), where onnxruntime's
+depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9), on a faster machine, without its transposes. The weights
+travel in the ONNX file's metadata (:data:`FILTER_KEY`, written by
+:func:`~volsr_core.runtime.export.export_onnx`); the graph stays the reference the kernel is tested against.
 """
 from __future__ import annotations
 

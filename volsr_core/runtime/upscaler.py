@@ -15,7 +15,6 @@ from volsr_core.runtime.base_filter import Scratch, filter_image
 from volsr_core.runtime.layout import to_channels_first, to_image_clipped
 from volsr_core.scene.camera import Camera, rotation_between
 from volsr_core.sr.history import HistoryFeed, history_mode
-from volsr_core.temporal.layered import LayeredUpsampler
 from volsr_core.temporal.resample import upscale_bilinear
 from volsr_core.temporal.taau import view_rotation
 
@@ -61,13 +60,17 @@ def takes_slabs(engine: Any) -> bool:
 
 
 def default_slabs(engine: Any) -> int:
-    """The depth slabs ``engine``'s model runs on when the caller names none: :data:`LAYERED_SLABS` where it can
-    refine the layered TAAU (:func:`takes_slabs`) at :data:`LAYERED_FROM_SCALE` or more, 0 (the TAAU) otherwise.
+    """The depth slabs ``engine``'s model runs on when the caller names none: those it was fitted on (its config's
+    ``taau_slabs``), else :data:`LAYERED_SLABS` where it can refine the layered TAAU (:func:`takes_slabs`) at
+    :data:`LAYERED_FROM_SCALE` or more, 0 (the TAAU) otherwise.
 
     Measured (docs/performance.md, "the layered TAAU"): at 4x two slabs lift VolSR XS against the native + bilinear
     curve on all four bench volumes at 512² and 1024² and four cost more render time than they give; at 8x two
     lift TAAU by 0.9-1.1 dB; at 2x the layered history is below TAAU's."""
-    return LAYERED_SLABS if takes_slabs(engine) and engine.config.scale >= LAYERED_FROM_SCALE else 0
+    if not takes_slabs(engine):
+        return 0
+    fitted_on = getattr(engine.config, "taau_slabs", 0)
+    return fitted_on or (LAYERED_SLABS if engine.config.scale >= LAYERED_FROM_SCALE else 0)
 
 
 class StatefulUpscaler:
@@ -103,7 +106,6 @@ class StatefulUpscaler:
         self.max_motion, self.max_offscreen = float(max_motion), float(max_offscreen)
         self.max_turn, self.max_zoom = float(max_turn), float(max_zoom)
         self.frames: deque[tuple[np.ndarray, np.ndarray, np.ndarray]] = deque(maxlen=self.config.previous_frames + 1)
-        self.history = HistoryFeed(self.config)
         self.base_filter = getattr(engine, "base_filter", None)  # variant XS on the CPU: no network inputs
         self.slabs = default_slabs(engine) if slabs is None else int(slabs)
         if self.slabs < 0:
@@ -111,7 +113,8 @@ class StatefulUpscaler:
         if self.slabs and not takes_slabs(engine):
             raise ValueError("depth slabs feed a layered TAAU, which only a base-filter model on TAAU (variant XS) "
                              "refines")
-        self.layered = LayeredUpsampler(self.config.scale) if self.slabs else None
+        # the layered TAAU on the frames' slabs, or the TAAU on their colour, whichever the model was fitted on
+        self.history = HistoryFeed(self.config, slabs=self.slabs)
         self._scratch = Scratch()  # work buffers kept between frames: the base filter's, the network's history
         self.resets = 0
         self.last_reset_reason = ""
@@ -120,8 +123,6 @@ class StatefulUpscaler:
         """Forget every previous frame and output."""
         self.frames.clear()
         self.history.reset()
-        if self.layered is not None:
-            self.layered.reset()
         self.resets += 1
         self.last_reset_reason = reason
 
@@ -190,15 +191,10 @@ class StatefulUpscaler:
         motion = frame.motion if self._continues(frame, colour) else np.zeros_like(frame.motion)
         self.frames.appendleft((colour, motion, np.asarray(frame.jitter, dtype=np.float32)))
         rotation = view_rotation(frame.camera, frame.previous_camera)
-        if self.layered is not None:
-            if frame.slabs is None or frame.slabs.shape[0] != self.slabs:
-                raise ValueError(f"this upscaler takes frames rendered in {self.slabs} depth slabs")
-            # told the pixels per voxel whatever the model's TAAU is told: XS 4x's filter on the told layered
-            # estimate beat it on the untold one by 0.7-1.9 dB at 1024² (docs/temporal.md, "Layered history")
-            base = self.layered(frame.slabs, tuple(frame.jitter), background, rotation, frame.pixels_per_voxel)
-        else:
-            base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth, rotation,
-                                frame.pixels_per_voxel)
+        # the layered TAAU is told the pixels per voxel whatever the model's TAAU is told: XS 4x's filter on the told
+        # layered estimate beat it on the untold one by 0.7-1.9 dB at 1024² (docs/temporal.md, "Layered history")
+        base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth, rotation, frame.pixels_per_voxel,
+                            slabs=frame.slabs, background=background)
         if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale
             base = upscale_bilinear(colour, self.config.scale)
         return filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True)

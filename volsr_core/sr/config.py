@@ -31,8 +31,10 @@ class DataSection:
 
 @dataclass(frozen=True, kw_only=True)
 class ModelSection:
-    """The network: a sized variant (XS, S, M, L), optionally with its own ``fold`` and ``widths``;
-    ``init`` names weights (model file or checkpoint) to fine-tune from."""
+    """The network: a sized variant (XS, S, M, L), optionally with its own ``fold`` and ``widths`` (XS: its
+    ``base_kernel``); the history flags as :class:`~volsr_core.sr.network_config.NetworkConfig` has them
+    (``taau_slabs`` K: XS on the layered TAAU of K depth slabs, the dataset's ``slabs``); ``init`` names weights
+    (model file or checkpoint) to fine-tune from."""
 
     variant: str = "S"
     fold: int | None = None
@@ -41,6 +43,8 @@ class ModelSection:
     taau_base: bool = False
     taau_aux: bool = False
     taau_fine_sampling: bool = False
+    taau_slabs: int = 0
+    base_kernel: int | None = None
     init: str | None = None
 
 
@@ -57,7 +61,8 @@ class OptimSection:
 @dataclass(frozen=True, kw_only=True)
 class TrainSection:
     """The loop: steps, batch, frames unrolled per sample, checkpoint and validation periods
-    (``validate_every`` None: once per epoch)."""
+    (``validate_every`` None: once per epoch); for a closed-form fit (XS) only ``max_val_samples`` and
+    ``fit_bias``."""
 
     steps: int = setting(1000, low=1)
     batch_size: int = setting(8, low=1)
@@ -66,6 +71,7 @@ class TrainSection:
     validate_every: int | None = None
     amp: bool = True
     max_val_samples: int = 64
+    fit_bias: bool = True  # closed-form fits (XS): False keeps the filter's bias at 0, so black stays black
 
 
 @dataclass(frozen=True, kw_only=True)

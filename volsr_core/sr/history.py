@@ -9,7 +9,10 @@ A network (:class:`~volsr_core.sr.network_config.NetworkConfig`) takes one of th
   the cut on), which the network refines; for a network with ``taau_aux`` followed by TAAU's side
   outputs (the reprojected history and its share of the blend: 7 channels). With ``taau_fine_sampling``
   the TAAU is told each frame's pixels per voxel (its fine-sampling settings, docs/temporal.md), as the
-  TAAU method is; networks trained before datasets recorded it run theirs without.
+  TAAU method is; networks trained before datasets recorded it run theirs without. With ``taau_slabs``
+  K it is the layered TAAU's estimate (:class:`~volsr_core.temporal.layered.LayeredUpsampler`, one history
+  per depth slab), fed each frame's K depth slabs and always told the pixels per voxel (as the upscaler
+  runs it: :class:`~volsr_core.runtime.upscaler.StatefulUpscaler`).
 
 :func:`pick_history` is the rule; :class:`HistoryFeed` applies it to a stream of frames (numpy,
 as the runtime and ``volsr eval`` run networks); training applies it to batches
@@ -22,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from volsr_core.temporal.layered import LayeredUpsampler
 from volsr_core.temporal.resample import upscale_bilinear
 from volsr_core.temporal.taau import TemporalUpsampler
 
@@ -63,14 +67,20 @@ class HistoryFeed:
     ``feed(colour, motion, jitter, depth, rotation, pixels_per_voxel)`` returns this frame's history (or
     None) and must see every frame from the cut on (TAAU accumulates over all of them; ``depth``,
     ``rotation`` and ``pixels_per_voxel`` as :class:`~volsr_core.temporal.taau.TemporalUpsampler` takes
-    them, the last passed on only for a network with ``taau_fine_sampling``); ``feed.keep(output)`` hands it
-    the network's output for that frame (a recurrent network's next history). :meth:`reset` is a cut.
+    them, the last passed on only for a network with ``taau_fine_sampling``); a network with ``taau_slabs``
+    also takes the frame's ``slabs`` (K, h, w, SLAB_CHANNELS) and the ``background`` they composite over,
+    and its estimate is the layered TAAU's of them; ``slabs`` (the constructor's) overrides the config's
+    ``taau_slabs``, as the upscaler's ``slabs`` does (0: the TAAU on the frame's colour). ``feed.keep(output)``
+    hands it the network's output for that frame (a recurrent network's next history). :meth:`reset` is a cut.
     """
 
-    def __init__(self, config: Any):
+    def __init__(self, config: Any, slabs: int | None = None):
         self.mode = history_mode(config)
         self.taau_aux = bool(getattr(config, "taau_aux", False))
-        self.taau = taau_upsampler(config.scale, self.taau_aux) if self.mode == "taau" else None
+        self.slabs = int(getattr(config, "taau_slabs", 0) if slabs is None else slabs)
+        self.taau: TemporalUpsampler | None = None
+        if self.mode == "taau":
+            self.taau = LayeredUpsampler(config.scale) if self.slabs else taau_upsampler(config.scale, self.taau_aux)
         self.fine_sampling = bool(getattr(config, "taau_fine_sampling", False))
         self.previous: np.ndarray | None = None
 
@@ -81,18 +91,26 @@ class HistoryFeed:
 
     def __call__(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
                  depth: np.ndarray | None = None, rotation: float | None = None,
-                 pixels_per_voxel: float | None = None) -> np.ndarray | None:
-        parts = self.parts(colour, motion, jitter, depth, rotation, pixels_per_voxel)
+                 pixels_per_voxel: float | None = None, *, slabs: np.ndarray | None = None,
+                 background: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray | None:
+        parts = self.parts(colour, motion, jitter, depth, rotation, pixels_per_voxel, slabs=slabs,
+                           background=background)
         return None if parts is None else parts[0] if len(parts) == 1 else np.concatenate(parts, axis=-1)
 
     def parts(self, colour: np.ndarray, motion: np.ndarray, jitter: tuple[float, float],
               depth: np.ndarray | None = None, rotation: float | None = None,
-              pixels_per_voxel: float | None = None) -> list[np.ndarray] | None:
+              pixels_per_voxel: float | None = None, *, slabs: np.ndarray | None = None,
+              background: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> list[np.ndarray] | None:
         """This frame's history as the (H, W, c) images whose channels, one after the other, make it (None for
         none): the estimate, then, with ``taau_aux``, what its blend threw away. The same call as the feed
         itself, for a caller that lays them out its own way without first joining them (a 7-channel copy)."""
         estimate = None
-        if self.taau is not None:
+        if self.slabs and self.mode == "taau":  # told the pixels per voxel always, as the upscaler runs it
+            if slabs is None or np.shape(slabs)[0] != self.slabs:
+                raise ValueError(f"the layered TAAU of {self.slabs} depth slabs takes each frame's slabs, got "
+                                 f"{None if slabs is None else np.shape(slabs)}")
+            estimate = [self.taau(slabs, jitter, background, rotation, pixels_per_voxel)]
+        elif self.taau is not None:
             estimate = [self.taau(colour, motion, jitter, depth, rotation,
                                   pixels_per_voxel if self.fine_sampling else None)]
             if self.taau_aux:

@@ -37,13 +37,13 @@ def is_closed_form(model: SuperResolutionNet) -> bool:
     return not model.config.widths and model.base_filter is not None
 
 
-def design_matrix(base: torch.Tensor, kernel: int) -> torch.Tensor:
+def design_matrix(base: torch.Tensor, kernel: int, bias: bool = True) -> torch.Tensor:
     """(3, H, W) -> (3, H*W, kernel² + 1) float64: each pixel's kernel x kernel neighbourhood per channel
-    (edge-padded, row-major as the convolution's weights), then a 1 for the bias."""
+    (edge-padded, row-major as the convolution's weights), then a 1 for the bias (without ``bias``: k² columns)."""
     r = kernel // 2
     padded = F.pad(base[:, None].double(), (r, r, r, r), mode="replicate")  # (3, 1, H + 2r, W + 2r)
     columns = F.unfold(padded, kernel).transpose(1, 2)  # (3, H*W, k²)
-    return torch.cat([columns, torch.ones_like(columns[..., :1])], dim=2)
+    return torch.cat([columns, torch.ones_like(columns[..., :1])], dim=2) if bias else columns
 
 
 def item_inputs(item: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -51,14 +51,16 @@ def item_inputs(item: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tens
     return item["lr"][None, :1], item["taau"][None, 0] if "taau" in item else None
 
 
-def fit_base_filter(model: SuperResolutionNet, dataset: SequenceDataset, progress: bool = True) -> int:
+def fit_base_filter(model: SuperResolutionNet, dataset: SequenceDataset, progress: bool = True,
+                    bias: bool = True) -> int:
     """Set ``model``'s base filter to the least-squares fit over every sample of ``dataset`` (whole
-    frames: ``crop`` None); returns the pixels fitted per channel."""
+    frames: ``crop`` None); returns the pixels fitted per channel. Without ``bias`` the bias stays 0 (a black
+    base stays black: a fitted bias of a few thousandths greys every background pixel, which SSIM punishes)."""
     from tqdm import tqdm
 
     base_filter = model.base_filter
     kernel, orientations = model.config.base_kernel, base_filter.orientations
-    unknowns = kernel * kernel + 1
+    unknowns = kernel * kernel + int(bias)
     normal = torch.zeros(orientations, 3, unknowns, unknowns, dtype=torch.float64)
     moment = torch.zeros(orientations, 3, unknowns, dtype=torch.float64)
     pixels = 0
@@ -66,7 +68,7 @@ def fit_base_filter(model: SuperResolutionNet, dataset: SequenceDataset, progres
         for i in tqdm(range(len(dataset)), desc="least squares", unit="frame", disable=not progress):
             item = dataset[i]
             base = model.unfiltered_base(*item_inputs(item))
-            a = design_matrix(base[0], kernel)
+            a = design_matrix(base[0], kernel, bias)
             target = item["hr"].reshape(3, -1, 1).double()
             second = second_orientation(base)[0, 0].flatten().bool() if orientations == 2 else None
             for m in range(orientations):
@@ -81,7 +83,9 @@ def fit_base_filter(model: SuperResolutionNet, dataset: SequenceDataset, progres
         ridge = RIDGE * normal.sum(0).diagonal(dim1=-2, dim2=-1).mean(dim=-1)[:, None, None] * eye  # (3, u, u)
         pooled = torch.linalg.solve(normal.sum(0) + ridge, moment.sum(0))
         solution = torch.linalg.solve(normal + ridge, moment + (ridge @ pooled[..., None])[..., 0])
-        base_filter.set_weights(solution[..., :-1].reshape(orientations, 3, kernel, kernel), solution[..., -1])
+        weights = solution[..., :kernel * kernel].reshape(orientations, 3, kernel, kernel)
+        biases = solution[..., -1] if bias else torch.zeros(orientations, 3, dtype=weights.dtype)
+        base_filter.set_weights(weights, biases)
     return pixels
 
 
@@ -109,7 +113,7 @@ def train_base_filter(config: TrainingConfig, model: SuperResolutionNet, progres
                                        seed=config.seed, taau=model.config if model.config.taau_base else None)
                 for split in ("train", "val")}
     with run_folder_lock(out):
-        pixels = fit_base_filter(model, datasets["train"], progress)
+        pixels = fit_base_filter(model, datasets["train"], progress, config.train.fit_bias)
         psnr = mean_psnr(model, datasets["val"], config.train.max_val_samples)
         save_checkpoint(out / "best.pt", model, extra={"step": 1, "psnr": psnr, "fitted_pixels": pixels})
         row = {"step": 1, "epoch": 0, "loss": "", "lr": "", "val_psnr": f"{psnr:.4f}", "val_ssim": "",

@@ -177,10 +177,24 @@ class SequenceDataset(Dataset):
             depth = h5[f"lr{s}/motion_depth" if f"lr{s}/motion_depth" in h5 else f"lr{s}/depth"][()].astype(np.float32)
             rotation = view_rotations(h5["cameras"][()])
             fineness = frame_pixels_per_voxel(self.videos[video_index], colour.shape[1])
+            slabs = self._slabs(video_index, h5)
             feed = HistoryFeed(self.taau)
             self._taau[video_index] = np.stack([feed(colour[t], motion[t], tuple(jitter[t]), depth[t], rotation[t],
-                                                     fineness[t]) for t in range(len(colour))]).astype(np.float16)
+                                                     fineness[t], slabs=None if slabs is None else slabs[t])
+                                                for t in range(len(colour))]).astype(np.float16)
         return self._taau[video_index]
+
+    def _slabs(self, video_index: int, h5: h5py.File) -> np.ndarray | None:
+        """(T, K, h, w, SLAB_CHANNELS) float32: the video's depth slabs at this scale where the network refines the
+        layered TAAU (``taau_slabs`` K), else None; InputError naming the store where it holds no K slabs."""
+        wanted = int(getattr(self.taau, "taau_slabs", 0))
+        if not wanted:
+            return None
+        key, file = f"lr{self.scale}/slabs", self.root / self.videos[video_index]["file"]
+        have = h5[key].shape[1] if key in h5 else 0
+        if have != wanted:
+            raise slabs_mismatch(file, have, wanted, self.scale)
+        return h5[key][()].astype(np.float32)
 
     def _lr_size(self, video_index: int) -> tuple[int, int]:
         width, height = self.videos[video_index]["hr_size"]
@@ -200,6 +214,13 @@ class SequenceDataset(Dataset):
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_files": {}}
+
+
+def slabs_mismatch(file: Path, have: int, wanted: int, scale: int) -> InputError:
+    """The error for a video store holding ``have`` depth slabs at ``scale`` where the network refines the layered
+    TAAU of ``wanted`` (``taau_slabs``)."""
+    return InputError(file, f"holds {have} depth slabs at {scale}x (lr{scale}/slabs), the network refines the layered "
+                            f"TAAU of {wanted}: make the dataset with `slabs: {wanted}`")
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:

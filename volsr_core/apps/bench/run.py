@@ -62,6 +62,8 @@ def infer_variant(config) -> str | None:
     """The variant (:data:`VARIANTS`) whose shape ``config`` (a NetworkConfig) is, else None."""
     from volsr_core.sr.network_config import variant_config
 
+    if not config.widths and config.base_kernel:  # no U-Net, a filter of any size: XS
+        return "XS"
     for name in VARIANTS:
         try:
             reference = variant_config(name, config.scale, config.previous_frames, config.features,
