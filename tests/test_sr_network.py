@@ -201,7 +201,7 @@ def test_a_network_config_reads_back_from_its_dict_and_refuses_unknown_keys():
     with pytest.raises(InputError, match=r"^m.pt: network.colour: unknown key \(allowed: scale, previous_frames, "
                                          r"features, fold, widths, reweight_width, feature_width, recurrent, "
                                          r"taau_base, taau_aux, base_kernel, base_orientations, "
-                                         r"taau_fine_sampling\)$"):
+                                         r"taau_fine_sampling, taau_slabs\)$"):
         NetworkConfig.from_dict({**config.to_dict(), "colour": True}, source="m.pt", key="network")
     with pytest.raises(InputError, match=r"^m.pt: network.widths\[0\]: expected an integer, got str '8'$"):
         NetworkConfig.from_dict({"widths": ["8"]}, source="m.pt", key="network")
@@ -237,7 +237,7 @@ def test_onnx_metadata_with_an_unknown_key_is_a_one_line_error(tmp_path):
         OnnxEngine(path, providers=["CPUExecutionProvider"])
     assert str(caught.value) == (f"{path}: volsr.network.colour: unknown key (allowed: scale, previous_frames, "
                                  "features, fold, widths, reweight_width, feature_width, recurrent, taau_base, taau_aux, "
-                                 "base_kernel, base_orientations, taau_fine_sampling)")
+                                 "base_kernel, base_orientations, taau_fine_sampling, taau_slabs)")
 
 
 # -- variant XS: a learned filter on the base --------------------------------------------------------
