@@ -58,6 +58,18 @@ def test_the_cpu_kernel_computes_what_the_network_filter_does(kernel, orientatio
     assert got.shape == (37, 29, 3) and np.abs(got - expected).max() < 1e-5
 
 
+@pytest.mark.parametrize("overrides, expected", [({}, (9, 1)), ({"base_kernel": 5, "base_orientations": 2}, (5, 2))])
+def test_a_training_config_overrides_the_variants_base_filter(overrides, expected):
+    from volsr_core.sr.config import TrainingConfig
+    from volsr_core.sr.training import build_model
+
+    config = TrainingConfig.from_dict({"data": {"root": ".", "scale": 4, "previous_frames": 0},
+                                       "model": {"variant": "XS", "taau_base": True, **overrides}})
+    net = build_model(config).config
+    assert (net.base_kernel, net.base_orientations) == expected
+    assert build_model(config).base_filter.orientations == expected[1]
+
+
 @pytest.mark.parametrize("direction, second", [(1.0, 0.0), (-1.0, 1.0)])
 def test_a_pair_takes_its_second_filter_on_edges_running_from_top_left_to_bottom_right(direction, second):
     """Stripes of constant x + y run from top right to bottom left (first filter), of constant x - y from top

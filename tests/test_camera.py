@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from volsr_core.scene.camera import Camera
+from volsr_core.scene.camera import Camera, rotation_between
 
 pytestmark = pytest.mark.vtk
 vtk_core = pytest.importorskip("vtkmodules.vtkRenderingCore")
@@ -86,6 +86,15 @@ def test_motions_match_vtk(name, motion, amount):
     # along the rotation. After VTK's OrthogonalizeViewUp both agree for |elevation| < 90 degrees.
     theirs.OrthogonalizeViewUp()
     assert_same_camera(getattr(camera, motion)(amount), theirs)
+
+
+@pytest.mark.parametrize("motion, amount", [m for m in MOTIONS if m[0] in ("azimuth", "elevation", "roll")])
+@pytest.mark.parametrize("name", CAMERAS)
+def test_rotation_between_is_the_angle_a_camera_motion_turns(name, motion, amount):
+    camera = CAMERAS[name]
+    expected = abs((amount + 180.0) % 360.0 - 180.0)  # a turn by ``amount`` degrees about one axis
+    assert rotation_between(camera, getattr(camera, motion)(amount)) == pytest.approx(expected, abs=1e-6)
+    assert rotation_between(camera, camera.zoom(1.5)) == pytest.approx(0.0, abs=1e-6)
 
 
 def test_motion_chain_matches_vtk():

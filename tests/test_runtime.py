@@ -12,7 +12,7 @@ from volsr_core.render.features import FeatureFrame  # noqa: E402
 from volsr_core.render.layout import OUT_CHANNELS  # noqa: E402
 from volsr_core.runtime.engines import OnnxEngine, TorchEngine, choose_providers  # noqa: E402
 from volsr_core.runtime.export import example_inputs, export_onnx  # noqa: E402
-from volsr_core.runtime.upscaler import StatefulUpscaler  # noqa: E402
+from volsr_core.runtime.upscaler import StatefulUpscaler, _motion_statistics  # noqa: E402
 from volsr_core.scene.camera import Camera  # noqa: E402
 from volsr_core.sr.network import SuperResolutionNet, variant_config  # noqa: E402
 
@@ -109,6 +109,19 @@ def test_upscaler_uses_history_and_resets_on_demand_on_size_change_and_on_jumps(
     jump = feature_frame(rng, h=7, w=9, motion=40.0)
     assert np.allclose(upscaler.upscale(jump), StatefulUpscaler(engine).upscale(jump), atol=1e-6)
     assert upscaler.last_reset_reason in ("large motion", "motion leaves the screen")
+
+
+@pytest.mark.parametrize("shape, step, spread", [((64, 64), 1, 3.0), ((130, 97), 2, 40.0), ((256, 200), 3, 0.0)])
+def test_motion_statistics_are_numpys_median_and_offscreen_fraction(shape, step, spread):
+    h, w = shape
+    motion = np.random.default_rng(h).normal(0.0, spread, (h, w, 2)).astype(np.float32)
+    sample = motion[::step, ::step]
+    squared = np.square(sample[..., 0]) + np.square(sample[..., 1])
+    x = np.arange(0, w, step)[None, :] + 0.5 + sample[..., 0]
+    y = np.arange(0, h, step)[:, None] + 0.5 + sample[..., 1]
+    median, offscreen = _motion_statistics(motion, step)
+    assert median == pytest.approx(float(np.median(squared)), rel=1e-6)
+    assert offscreen == pytest.approx(float(np.mean((x < 0) | (x > w) | (y < 0) | (y > h))), abs=1e-12)
 
 
 def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(tmp_path):

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections import deque
 from typing import Any, Sequence
 
+import numba
 import numpy as np
 
 from volsr_core.render.features import FeatureFrame
@@ -26,6 +27,25 @@ def network_inputs(frame: FeatureFrame, features: tuple[str, ...]) -> np.ndarray
         buffer = np.asarray(getattr(frame, name), dtype=np.float32)
         planes.append(buffer[..., None] if buffer.ndim == 2 else buffer)
     return np.ascontiguousarray(np.concatenate(planes, axis=-1).transpose(2, 0, 1))
+
+
+@numba.njit(cache=True)
+def _motion_statistics(motion: np.ndarray, step: int) -> tuple[float, float]:
+    """Over every ``step``-th pixel each way of ``motion`` (h, w, 2; LR px, from the pixel centre): the median of
+    the vectors' squared lengths and the fraction that point off the frame (a numba loop: numpy's passes over the
+    strided sample cost 0.15-0.4 ms a frame, ten times this)."""
+    h, w = motion.shape[0], motion.shape[1]
+    rows, cols = (h + step - 1) // step, (w + step - 1) // step
+    squared = np.empty(rows * cols, np.float32)
+    off = 0
+    for j in range(rows):
+        for i in range(cols):
+            mx, my = motion[j * step, i * step, 0], motion[j * step, i * step, 1]
+            squared[j * cols + i] = mx * mx + my * my
+            x, y = i * step + 0.5 + mx, j * step + 0.5 + my
+            if x < 0 or x > w or y < 0 or y > h:
+                off += 1
+    return np.median(squared), off / (rows * cols)
 
 
 def camera_jump(previous: Camera | None, camera: Camera, max_turn: float = 30.0, max_zoom: float = 2.0) -> str:
@@ -130,14 +150,10 @@ class StatefulUpscaler:
         """Both statistics over every ``step``-th pixel each way (about 64 x 64 of them): frame-wide fractions
         that need no more, at a sixteenth of the cost on a 256² frame."""
         h, w = motion.shape[:2]
-        step = max(1, min(h, w) // 64)
-        sample = motion[::step, ::step]
-        squared = np.square(sample[..., 0]) + np.square(sample[..., 1])  # the median of lengths, squared
-        if np.median(squared) > (self.max_motion * np.hypot(h, w)) ** 2:
+        squared_median, offscreen = _motion_statistics(motion, max(1, min(h, w) // 64))
+        if squared_median > (self.max_motion * np.hypot(h, w)) ** 2:
             return "large motion"
-        x = np.arange(0, w, step, dtype=np.float32)[None, :] + 0.5 + sample[..., 0]
-        y = np.arange(0, h, step, dtype=np.float32)[:, None] + 0.5 + sample[..., 1]
-        if np.mean((x < 0) | (x > w) | (y < 0) | (y > h)) > self.max_offscreen:
+        if offscreen > self.max_offscreen:
             return "motion leaves the screen"
         return ""
 

@@ -109,8 +109,8 @@ def build_model(config: TrainingConfig) -> SuperResolutionNet:
     data, model = config.data, config.model
     net = variant_config(model.variant, data.scale, data.previous_frames, data.features, model.recurrent,
                          model.taau_base, model.taau_aux, model.taau_fine_sampling, model.taau_slabs)
-    overrides = {k: v for k, v in (("fold", model.fold), ("widths", model.widths), ("base_kernel", model.base_kernel))
-                 if v is not None}
+    overrides = {k: v for k, v in (("fold", model.fold), ("widths", model.widths), ("base_kernel", model.base_kernel),
+                                    ("base_orientations", model.base_orientations)) if v is not None}
     if overrides:
         net = NetworkConfig(**{**net.to_dict(), **overrides})
     return SuperResolutionNet(net)

@@ -40,29 +40,30 @@ _INFO = 11  # per slab and LR pixel: RGBA box low (4) and high (4), motion (2), 
 def _prepass(slabs, info):
     """Per slab and LR pixel of ``slabs`` (K, h, w, SLAB_CHANNELS): the 3x3 neighbourhood's RGBA min/max, the
     motion vector the HR pixels nearest it take (its own where its slab shows something, else that of the most
-    opaque neighbour) and whether any of the nine shows something, into ``info`` (K, h, w, _INFO)."""
+    opaque neighbour, the first in row order among equals) and whether any of the nine shows something, into
+    ``info`` (K, h, w, _INFO). The box and the search stay in registers (scalars, not ``info``'s elements)."""
     n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
+    big = np.float32(1e30)
     for j in numba.prange(h):
         for k in range(n_slabs):
             for i in range(w):
-                for c in range(4):
-                    info[k, j, i, c] = np.float32(1e30)
-                    info[k, j, i, 4 + c] = np.float32(-1e30)
+                lo0 = lo1 = lo2 = lo3 = big
+                hi0 = hi1 = hi2 = hi3 = -big
                 best = np.float32(_EMPTY)
                 mx = my = np.float32(0.0)
                 for yy in range(max(j - 1, 0), min(j + 2, h)):
                     for xx in range(max(i - 1, 0), min(i + 2, w)):
-                        for c in range(4):
-                            v = slabs[k, yy, xx, SLAB_RGBA + c]
-                            info[k, j, i, c] = min(info[k, j, i, c], v)
-                            info[k, j, i, 4 + c] = max(info[k, j, i, 4 + c], v)
-                        a = slabs[k, yy, xx, SLAB_RGBA + 3]
+                        r, g = slabs[k, yy, xx, SLAB_RGBA], slabs[k, yy, xx, SLAB_RGBA + 1]
+                        b, a = slabs[k, yy, xx, SLAB_RGBA + 2], slabs[k, yy, xx, SLAB_RGBA + 3]
+                        lo0, lo1, lo2, lo3 = min(lo0, r), min(lo1, g), min(lo2, b), min(lo3, a)
+                        hi0, hi1, hi2, hi3 = max(hi0, r), max(hi1, g), max(hi2, b), max(hi3, a)
                         if a > best:
                             best, mx, my = a, slabs[k, yy, xx, SLAB_MOTION], slabs[k, yy, xx, SLAB_MOTION + 1]
                 if slabs[k, j, i, SLAB_RGBA + 3] > _EMPTY:
                     mx, my = slabs[k, j, i, SLAB_MOTION], slabs[k, j, i, SLAB_MOTION + 1]
-                info[k, j, i, 8] = mx
-                info[k, j, i, 9] = my
+                info[k, j, i, 0], info[k, j, i, 1], info[k, j, i, 2], info[k, j, i, 3] = lo0, lo1, lo2, lo3
+                info[k, j, i, 4], info[k, j, i, 5], info[k, j, i, 6], info[k, j, i, 7] = hi0, hi1, hi2, hi3
+                info[k, j, i, 8], info[k, j, i, 9] = mx, my
                 info[k, j, i, 10] = 1.0 if best > _EMPTY else 0.0
 
 
