@@ -6,7 +6,7 @@ import pytest
 from test_taau import pattern, psnr
 
 from volsr_core.temporal import halton_jitter, jitter_phases
-from volsr_core.temporal.layered import LayeredUpsampler
+from volsr_core.temporal.layered import _EMPTY, _INFO, LayeredUpsampler, _prepass
 from volsr_core.temporal.taau import TemporalUpsampler
 
 
@@ -35,6 +35,33 @@ def lr_slabs(lr: int, scale: int, jitter, t: int, speed: float) -> np.ndarray:
         slabs[k, ..., :3], slabs[k, ..., 3] = alpha * rgb, alpha
         slabs[k, ..., 4] = (-speed if k == 0 else speed) / scale
     return slabs
+
+
+def prepass_reference(slabs: np.ndarray) -> np.ndarray:
+    """The prepass by its definition, pixel by pixel over each 3x3 neighbourhood (edges cut off): RGBA min and max,
+    the motion of the pixel itself where its slab shows something, else of the most opaque of the nine (the first
+    in row order among equals), and whether any of the nine shows something."""
+    n_slabs, h, w = slabs.shape[:3]
+    info = np.zeros((n_slabs, h, w, _INFO), np.float32)
+    for k, j, i in np.ndindex(n_slabs, h, w):
+        block = slabs[k, max(j - 1, 0):j + 2, max(i - 1, 0):i + 2].reshape(-1, 6)
+        info[k, j, i, :4], info[k, j, i, 4:8] = block[:, :4].min(axis=0), block[:, :4].max(axis=0)
+        first = int(np.argmax(block[:, 3]))  # numpy's argmax: the first of equal maxima, in row order
+        shows = block[first, 3] > _EMPTY
+        own = slabs[k, j, i, 3] > _EMPTY
+        info[k, j, i, 8:10] = slabs[k, j, i, 4:6] if own else block[first, 4:6] if shows else 0.0
+        info[k, j, i, 10] = float(shows)
+    return info
+
+
+def test_the_prepass_is_its_definition_ties_and_empty_slabs_included():
+    rng = np.random.default_rng(3)
+    slabs = rng.uniform(0.0, 1.0, (2, 9, 11, 6)).astype(np.float32)
+    slabs[..., 3] = rng.choice([0.0, 5e-5, 0.25, 0.5, 1.0], size=(2, 9, 11))  # ties, and alphas at or below empty
+    slabs[1, 2:6, 3:8, 3] = 0.0  # a patch of slab 1 shows nothing
+    info, across = np.empty((2, 9, 11, _INFO), np.float32), np.empty((2, 9, 11, _INFO), np.float32)
+    _prepass(slabs, across, info)
+    np.testing.assert_array_equal(info, prepass_reference(slabs))
 
 
 def test_layers_moving_apart_keep_their_history_where_one_vector_per_pixel_loses_it():

@@ -32,8 +32,8 @@ def network_inputs(frame: FeatureFrame, features: tuple[str, ...]) -> np.ndarray
 @numba.njit(cache=True)
 def _motion_statistics(motion: np.ndarray, step: int) -> tuple[float, float]:
     """Over every ``step``-th pixel each way of ``motion`` (h, w, 2; LR px, from the pixel centre): the median of
-    the vectors' squared lengths and the fraction that point off the frame (a numba loop: numpy's passes over the
-    strided sample cost 0.15-0.4 ms a frame, ten times this)."""
+    the vectors' squared lengths and the fraction that point off the frame (one numba loop: 27 µs on a 128² frame's
+    strided motion buffer, where numpy's passes over the sample took 109)."""
     h, w = motion.shape[0], motion.shape[1]
     rows, cols = (h + step - 1) // step, (w + step - 1) // step
     squared = np.empty(rows * cols, np.float32)

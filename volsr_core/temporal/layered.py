@@ -37,34 +37,51 @@ _INFO = 11  # per slab and LR pixel: RGBA box low (4) and high (4), motion (2), 
 
 
 @numba.njit(parallel=True, **_NB)
-def _prepass(slabs, info):
-    """Per slab and LR pixel of ``slabs`` (K, h, w, SLAB_CHANNELS): the 3x3 neighbourhood's RGBA min/max, the
-    motion vector the HR pixels nearest it take (its own where its slab shows something, else that of the most
-    opaque neighbour, the first in row order among equals) and whether any of the nine shows something, into
-    ``info`` (K, h, w, _INFO). The box and the search stay in registers (scalars, not ``info``'s elements)."""
-    n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
-    big = np.float32(1e30)
+def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, dst):
+    """Per slab and LR pixel of ``src`` (K, h, w, C): over it and its two neighbours in its row (``vertical``: its
+    column), the minimum of the four channels from ``lo_at``, the maximum of the four from ``hi_at`` and, of the
+    most opaque of the three (alpha at ``alpha_at``; the first among equals, from the left or the top), the alpha
+    and the motion at ``motion_at``, into ``dst`` (K, h, w, _INFO): low 0-3, high 4-7, motion 8-9, alpha 10."""
+    n_slabs, h, w = src.shape[0], src.shape[1], src.shape[2]
+    dy, dx = (1, 0) if vertical else (0, 1)
     for j in numba.prange(h):
         for k in range(n_slabs):
             for i in range(w):
-                lo0 = lo1 = lo2 = lo3 = big
-                hi0 = hi1 = hi2 = hi3 = -big
+                lo0 = lo1 = lo2 = lo3 = np.float32(1e30)
+                hi0 = hi1 = hi2 = hi3 = np.float32(-1e30)
                 best = np.float32(_EMPTY)
                 mx = my = np.float32(0.0)
-                for yy in range(max(j - 1, 0), min(j + 2, h)):
-                    for xx in range(max(i - 1, 0), min(i + 2, w)):
-                        r, g = slabs[k, yy, xx, SLAB_RGBA], slabs[k, yy, xx, SLAB_RGBA + 1]
-                        b, a = slabs[k, yy, xx, SLAB_RGBA + 2], slabs[k, yy, xx, SLAB_RGBA + 3]
-                        lo0, lo1, lo2, lo3 = min(lo0, r), min(lo1, g), min(lo2, b), min(lo3, a)
-                        hi0, hi1, hi2, hi3 = max(hi0, r), max(hi1, g), max(hi2, b), max(hi3, a)
-                        if a > best:
-                            best, mx, my = a, slabs[k, yy, xx, SLAB_MOTION], slabs[k, yy, xx, SLAB_MOTION + 1]
+                for n in range(-1, 2):
+                    y, x = j + n * dy, i + n * dx
+                    if y < 0 or y >= h or x < 0 or x >= w:
+                        continue
+                    lo0, lo1 = min(lo0, src[k, y, x, lo_at]), min(lo1, src[k, y, x, lo_at + 1])
+                    lo2, lo3 = min(lo2, src[k, y, x, lo_at + 2]), min(lo3, src[k, y, x, lo_at + 3])
+                    hi0, hi1 = max(hi0, src[k, y, x, hi_at]), max(hi1, src[k, y, x, hi_at + 1])
+                    hi2, hi3 = max(hi2, src[k, y, x, hi_at + 2]), max(hi3, src[k, y, x, hi_at + 3])
+                    if src[k, y, x, alpha_at] > best:
+                        best, mx, my = src[k, y, x, alpha_at], src[k, y, x, motion_at], src[k, y, x, motion_at + 1]
+                dst[k, j, i, 0], dst[k, j, i, 1], dst[k, j, i, 2], dst[k, j, i, 3] = lo0, lo1, lo2, lo3
+                dst[k, j, i, 4], dst[k, j, i, 5], dst[k, j, i, 6], dst[k, j, i, 7] = hi0, hi1, hi2, hi3
+                dst[k, j, i, 8], dst[k, j, i, 9], dst[k, j, i, 10] = mx, my, best
+
+
+@numba.njit(parallel=True, **_NB)
+def _prepass(slabs, across, info):
+    """Per slab and LR pixel of ``slabs`` (K, h, w, SLAB_CHANNELS): the 3x3 neighbourhood's RGBA min/max, the
+    motion vector the HR pixels nearest it take (its own where its slab shows something, else that of the most
+    opaque neighbour, the first in row order among equals) and whether any of the nine shows something, into
+    ``info`` (K, h, w, _INFO); separably (:func:`_widen`): three pixels of each row first (into the work buffer
+    ``across``, of ``info``'s shape), then three rows of those, then each pixel's own motion where it shows."""
+    _widen(slabs, SLAB_RGBA, SLAB_RGBA, SLAB_RGBA + 3, SLAB_MOTION, False, across)
+    _widen(across, 0, 4, 10, 8, True, info)
+    n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
+    for j in numba.prange(h):
+        for k in range(n_slabs):
+            for i in range(w):
                 if slabs[k, j, i, SLAB_RGBA + 3] > _EMPTY:
-                    mx, my = slabs[k, j, i, SLAB_MOTION], slabs[k, j, i, SLAB_MOTION + 1]
-                info[k, j, i, 0], info[k, j, i, 1], info[k, j, i, 2], info[k, j, i, 3] = lo0, lo1, lo2, lo3
-                info[k, j, i, 4], info[k, j, i, 5], info[k, j, i, 6], info[k, j, i, 7] = hi0, hi1, hi2, hi3
-                info[k, j, i, 8], info[k, j, i, 9] = mx, my
-                info[k, j, i, 10] = 1.0 if best > _EMPTY else 0.0
+                    info[k, j, i, 8], info[k, j, i, 9] = slabs[k, j, i, SLAB_MOTION], slabs[k, j, i, SLAB_MOTION + 1]
+                info[k, j, i, 10] = 1.0 if info[k, j, i, 10] > _EMPTY else 0.0
 
 
 @numba.njit(**_NB)
@@ -145,7 +162,8 @@ class LayeredUpsampler(TemporalUpsampler):
 
     def __init__(self, scale: int, *, sigma: float = 0.25, **settings):
         super().__init__(scale, sigma=sigma, side_outputs=False, **settings)
-        self._info: np.ndarray | None = None
+        self._info: np.ndarray | None = None  # the prepass's results, and its work buffer
+        self._across: np.ndarray | None = None
 
     def __call__(self, lr_slabs: np.ndarray, jitter: tuple[float, float], background=(0.0, 0.0, 0.0),
                  rotation: float | None = None, pixels_per_voxel: float | None = None) -> np.ndarray:
@@ -172,7 +190,8 @@ class LayeredUpsampler(TemporalUpsampler):
         cols, runs = self._columns(w, jx, sigma)
         if self._info is None or self._info.shape[:3] != (n_slabs, h, w):
             self._info = np.empty((n_slabs, h, w, _INFO), dtype=np.float32)
-        _prepass(slabs, self._info)
+            self._across = np.empty_like(self._info)
+        _prepass(slabs, self._across, self._info)
         new_history = self._spare if self._spare is not None and self._spare.shape == shape else \
             np.empty(shape, dtype=np.float32)
         out = np.empty((h * s, w * s, 3), dtype=np.float32)
