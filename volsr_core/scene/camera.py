@@ -271,7 +271,7 @@ def transform_camera(camera: Camera, matrix: Any) -> Camera:
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a`` x ``b`` of two 3-vectors, float64: np.cross's checks cost it about 20 µs a call, ten times this."""
+    """``a`` x ``b`` of two 3-vectors, float64: np.cross's checks cost it about 23 µs a call, twenty times this."""
     a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
     b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
     return np.array((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0))

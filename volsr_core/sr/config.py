@@ -13,6 +13,8 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from volsr_core.config_reader import Source, read_dataclass, read_yaml, setting
+from volsr_core.errors import InputError
+from volsr_core.sr.network_config import NetworkConfig, variant_config
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -121,11 +123,27 @@ def _merged(base: dict[str, Any], changes: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def network_config(config: TrainingConfig) -> NetworkConfig:
+    """The network ``config`` trains: its variant's at its scale and inputs, with the model section's overrides;
+    ValueError where they make no network."""
+    data, model = config.data, config.model
+    net = variant_config(model.variant, data.scale, data.previous_frames, data.features, model.recurrent,
+                         model.taau_base, model.taau_aux, model.taau_fine_sampling, model.taau_slabs)
+    overrides = {k: v for k, v in (("fold", model.fold), ("widths", model.widths), ("base_kernel", model.base_kernel),
+                                    ("base_orientations", model.base_orientations)) if v is not None}
+    return NetworkConfig(**{**net.to_dict(), **overrides}) if overrides else net
+
+
 def load_training_config(path: str | os.PathLike) -> TrainingConfig:
     """The config at ``path`` with defaults filled; ``data.root``, ``out`` and ``model.init``
-    (environment variables expanded) resolved against the file's folder."""
+    (environment variables expanded) resolved against the file's folder. A model section that makes no network
+    is a one-line InputError naming the file."""
     source = Path(path)
     config = TrainingConfig.from_dict(read_yaml(source), source)
+    try:
+        network_config(config)
+    except ValueError as err:
+        raise InputError(source, f"model: {err}") from None
 
     def resolved(written: str | None) -> str | None:
         return None if written is None else str((source.parent / os.path.expandvars(written)).resolve())

@@ -30,12 +30,12 @@ from torch.utils.data import DataLoader, Sampler
 from volsr_core.atomic import atomic_write
 from volsr_core.errors import InputError, OutputError
 from volsr_core.sr.checkpoint import load_checkpoint, load_model, save_checkpoint
-from volsr_core.sr.config import TrainingConfig
+from volsr_core.sr.config import TrainingConfig, network_config
 from volsr_core.sr.history import history_mode
 from volsr_core.sr.loader import SequenceDataset
 from volsr_core.sr.losses import ReconstructionLoss, temporal_charbonnier
 from volsr_core.sr.metrics import psnr_ssim
-from volsr_core.sr.network import NetworkConfig, SuperResolutionNet, run_unrolled, upsample_motion, variant_config
+from volsr_core.sr.network import SuperResolutionNet, run_unrolled, upsample_motion
 
 LOG_FIELDS = ["step", "epoch", "loss", "lr", "val_psnr", "val_ssim", "seconds"]
 LOCK_NAME = "train.lock"
@@ -106,14 +106,7 @@ class StepBatches(Sampler):
 
 
 def build_model(config: TrainingConfig) -> SuperResolutionNet:
-    data, model = config.data, config.model
-    net = variant_config(model.variant, data.scale, data.previous_frames, data.features, model.recurrent,
-                         model.taau_base, model.taau_aux, model.taau_fine_sampling, model.taau_slabs)
-    overrides = {k: v for k, v in (("fold", model.fold), ("widths", model.widths), ("base_kernel", model.base_kernel),
-                                    ("base_orientations", model.base_orientations)) if v is not None}
-    if overrides:
-        net = NetworkConfig(**{**net.to_dict(), **overrides})
-    return SuperResolutionNet(net)
+    return SuperResolutionNet(network_config(config))
 
 
 def lr_factor(step: int, warmup: int, total: int, min_ratio: float) -> float:
