@@ -1,7 +1,7 @@
 """Milliseconds per call of the TAAU kernel, on rendered orbit frames, optionally side by side with an earlier commit's.
 
     python benchmarks/bench_taau.py [--volume CT_AVM.nii.gz:CT-AAA:0,446] [--sizes 512,1024] [--scales 2,4]
-                                    [--degrees 2] [--frames 12] [--passes 3] [--against COMMIT]
+                                    [--degrees 2] [--frames 12] [--passes 3] [--slabs K] [--against COMMIT]
 
 The LR frames of each output size and scale are rendered once, as ``volsr bench`` renders TAAU's (Halton
 jitter, motion vectors to the previous camera, the reprojected point's depth, the view's rotation, the
@@ -10,8 +10,10 @@ frame's pixels per voxel; ray starts jittered), then fed ``--passes`` times thro
 ``volsr_core/temporal/taau.py`` of that commit (``git show``) runs too, interleaved call by call with
 the current one so that machine noise hits both alike; the table gives the median ms per call of
 each (the calls after the first two frames of a pass, which have a history), their ratio and the
-largest difference between their outputs. ``--volume`` is a ``volsr bench`` volume spec
-(``../shared/data/volumes`` is searched for a bare file name) or ``phantom``.
+largest difference between their outputs. ``--slabs K`` times the layered TAAU instead
+(``LayeredUpsampler``, ``volsr_core/temporal/layered.py``) on frames rendered in K depth slabs, as XS 4x runs.
+``--volume`` is a ``volsr bench`` volume spec (``../shared/data/volumes`` is searched for a bare file name) or
+``phantom``.
 """
 from __future__ import annotations
 
@@ -30,13 +32,14 @@ import numpy as np
 from volsr_core.apps.bench.scenes import BenchVolume, load_bench_volume
 from volsr_core.render import RayCaster
 from volsr_core.scene.camera_paths import orbit_around
-from volsr_core.temporal import halton_jitter, jitter_phases
+from volsr_core.temporal import halton_jitter, jitter_phases, layered
 from volsr_core.temporal import taau as current
 from volsr_core.temporal.taau import view_rotation
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "volumes"
 KERNEL = "volsr_core/temporal/taau.py"
+LAYERED_KERNEL = "volsr_core/temporal/layered.py"
 HISTORY_FRAMES = 2  # calls before these have no (or a one-frame) history: not timed
 
 
@@ -54,21 +57,27 @@ def module_at(commit: str, folder: Path, kernel: str = KERNEL) -> ModuleType:
     return module
 
 
-def lr_frames(caster: RayCaster, cameras: list, size: int, scale: int) -> list[tuple]:
-    """TAAU's arguments for each camera: colour, motion, jitter, depth, rotation, pixels per voxel."""
+def lr_frames(caster: RayCaster, cameras: list, size: int, scale: int, slabs: int = 0) -> list[tuple]:
+    """TAAU's arguments for each camera: colour, motion, jitter, depth, rotation, pixels per voxel; with ``slabs``
+    K the layered TAAU's: the frame's K depth slabs, jitter, background, rotation, pixels per voxel."""
     frames, previous = [], None
     for t, camera in enumerate(cameras):
         lr = caster.render(camera, size // scale, size // scale, jitter=halton_jitter(t, jitter_phases(scale)),
-                           previous_camera=previous, seed=t)
-        frames.append((lr.color.copy(), lr.motion.copy(), lr.jitter, lr.motion_depth.copy(),
-                       view_rotation(camera, previous), lr.pixels_per_voxel))
+                           previous_camera=previous, seed=t, slabs=slabs)
+        rotation = view_rotation(camera, previous)
+        if slabs:
+            frames.append((lr.slabs.copy(), lr.jitter, caster.background, rotation, lr.pixels_per_voxel))
+        else:
+            frames.append((lr.color.copy(), lr.motion.copy(), lr.jitter, lr.motion_depth.copy(), rotation,
+                           lr.pixels_per_voxel))
         previous = camera
     return frames
 
 
-def time_side_by_side(modules: list[ModuleType], frames: list[tuple], scale: int, passes: int):
-    """Median ms per call of each module's ``TemporalUpsampler`` (interleaved), and the largest output difference."""
-    upsamplers = [m.TemporalUpsampler(scale) for m in modules]
+def time_side_by_side(modules: list[ModuleType], frames: list[tuple], scale: int, passes: int, slabs: int = 0):
+    """Median ms per call of each module's ``TemporalUpsampler`` (with ``slabs``: ``LayeredUpsampler``; interleaved),
+    and the largest output difference."""
+    upsamplers = [m.LayeredUpsampler(scale) if slabs else m.TemporalUpsampler(scale) for m in modules]
     times: list[list[float]] = [[] for _ in modules]
     difference = 0.0
     for _ in range(passes):
@@ -126,15 +135,18 @@ def orbit_scene(args: argparse.Namespace) -> tuple[BenchVolume, RayCaster, list]
 def main() -> None:
     parser = orbit_parser(__doc__.split("\n\n")[0])
     parser.add_argument("--passes", type=int, default=3)
+    parser.add_argument("--slabs", type=int, default=0, help="time the layered TAAU on K depth slabs (0: TAAU)")
     args = parser.parse_args()
     scene, caster, cameras = orbit_scene(args)
+    kernel, module = (LAYERED_KERNEL, layered) if args.slabs else (KERNEL, current)
     with tempfile.TemporaryDirectory() as folder:
-        modules = [current] + ([module_at(args.against, Path(folder))] if args.against else [])
+        modules = [module] + ([module_at(args.against, Path(folder), kernel)] if args.against else [])
         print(f"{scene.label}, {args.frames} frames of {args.degrees:g}°, {args.passes} passes\n")
-        print(table_header("| output | scale | TAAU ms", args.against))
+        print(table_header(f"| output | scale | {'layered TAAU' if args.slabs else 'TAAU'} ms", args.against))
         for size in (int(s) for s in args.sizes.split(",")):
             for scale in (int(s) for s in args.scales.split(",")):
-                ms, difference = time_side_by_side(modules, lr_frames(caster, cameras, size, scale), scale, args.passes)
+                frames = lr_frames(caster, cameras, size, scale, args.slabs)
+                ms, difference = time_side_by_side(modules, frames, scale, args.passes, args.slabs)
                 print(table_row(f"| {size}² | {scale}x", ms, difference), flush=True)
 
 

@@ -60,8 +60,11 @@ def test_the_prepass_is_its_definition_ties_and_empty_slabs_included():
     slabs[..., 3] = rng.choice([0.0, 5e-5, 0.25, 0.5, 1.0], size=(2, 9, 11))  # ties, and alphas at or below empty
     slabs[1, 2:6, 3:8, 3] = 0.0  # a patch of slab 1 shows nothing
     info, across = np.empty((2, 9, 11, _INFO), np.float32), np.empty((2, 9, 11, _INFO), np.float32)
-    _prepass(slabs, across, info)
-    np.testing.assert_array_equal(info, prepass_reference(slabs))
+    _prepass(slabs, True, across, info)
+    reference = prepass_reference(slabs)
+    np.testing.assert_array_equal(info, reference)
+    _prepass(slabs, False, across, info)  # without the box (a frame that does not rectify): the rest alike
+    np.testing.assert_array_equal(info[..., 8:], reference[..., 8:])
 
 
 def test_layers_moving_apart_keep_their_history_where_one_vector_per_pixel_loses_it():
@@ -98,6 +101,27 @@ def test_constant_slabs_stay_constant_over_the_background_under_any_motion_and_j
         assert out.shape == (18, 22, 3)
         np.testing.assert_allclose(out, np.broadcast_to(expected, out.shape), atol=1e-5)
         assert np.all(up.history[1] == 0.0), "an empty slab keeps an empty history"
+
+
+@pytest.mark.parametrize("rotation", [2.0, 0.0])
+def test_the_history_is_clamped_while_the_view_is_still_and_blended_whole_while_it_rotates(rotation: float):
+    """An opaque slab turns from one uniform colour to another between two frames that move (motion 0.25 LR px).
+    While the view is still (a pan: the history may grow long) the 3x3 box of the new frame, a single colour,
+    clamps the history to it: the new colour exactly. While it rotates the history is short and not clamped: the
+    output lies strictly between the two, the old colour's share that of the history's weight."""
+    before, after = np.array([0.8, 0.2, 0.1], np.float32), np.array([0.1, 0.5, 0.9], np.float32)
+    up = LayeredUpsampler(4)
+    slabs = np.zeros((2, 8, 8, 6), dtype=np.float32)
+    slabs[0, ..., :3], slabs[0, ..., 3] = before, 1.0
+    up(slabs, (0.0, 0.0), rotation=rotation)
+    slabs[0, ..., :3], slabs[0, ..., 4] = after, 0.25
+    out = up(slabs, (0.25, -0.25), rotation=rotation)[8:24, 8:24]  # away from the border the history is fetched from
+    if rotation == 0.0:
+        np.testing.assert_allclose(out, np.broadcast_to(after, out.shape), atol=1e-6)
+    else:
+        old_share = (out - after) / (before - after)  # the same for every channel: one blend of two colours
+        assert np.all(old_share > 0.05) and np.all(old_share < 0.95)
+        np.testing.assert_allclose(old_share, old_share[..., :1].repeat(3, axis=-1), atol=1e-5)
 
 
 def test_a_change_in_slabs_or_size_starts_a_new_history():

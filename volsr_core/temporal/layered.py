@@ -14,13 +14,19 @@ pixel and slab, the steps of :class:`~volsr_core.temporal.taau.TemporalUpsampler
    most opaque sample of the slab in its 3x3 neighbourhood; a slab empty in all nine is empty here
    (its history is cleared and the pixel costs next to nothing);
 3. **History**: bilinear fetch of the slab's premultiplied RGBA and accumulated weight;
-4. **Rectification**: per-channel clamp into the slab's RGBA min/max box of the 3x3 LR neighbourhood
-   (skipped when nothing moves at all, as TAAU does);
-5. blend as TAAU (``out = (n * history + a * estimate) / (n + a)``, ``n`` capped by the view's rotation);
+4. **Rectification**, only while the view does not rotate (a pan, a zoom: the history is long there, up to
+   ``still_count``): per-channel clamp into the slab's RGBA min/max box of the 3x3 LR neighbourhood;
+   skipped when nothing moves at all, as TAAU does, and under rotation, where the cap keeps the history
+   short and the slabs already keep apart what moves apart: there the clamp threw away more good history
+   than stale (measured on the training videos: docs/temporal.md, "A shorter history");
+5. blend as TAAU (``out = (n * history + a * estimate) / (n + a)``, ``n`` capped by the view's rotation,
+   ``max_count / (1 + rotation / cap_angle)`` with ``cap_angle`` 0.3 here against TAAU's 2/3: the bilinear
+   fetch blurs what it resamples, so a shorter history pays);
 
 then the slabs are composited front to back over the background. No depth test: a structure that
 moves in front of another lies in another slab. Settings, caps and the still-camera behaviour are
-TAAU's (the same constructor); the depth test's ``disocclusion`` and ``dis_motion`` are not used.
+TAAU's (the same constructor, ``sigma``, ``cap_angle`` and ``smooth_count`` defaulting to this TAAU's own);
+the depth test's ``disocclusion`` and ``dis_motion`` are not used.
 Measured in docs/temporal.md ("Layered history"); feed it ``halton_jitter(frame, jitter_phases(scale))``.
 """
 from __future__ import annotations
@@ -29,7 +35,7 @@ import numba
 import numpy as np
 
 from volsr_core.render.layout import SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA
-from volsr_core.temporal.taau import TemporalUpsampler, _moves, _row_window, _splat_weights
+from volsr_core.temporal.taau import STILL_BELOW, TemporalUpsampler, _moves, _row_window, _splat_weights
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
 _EMPTY = 1e-4  # a slab with at most this alpha at an LR sample shows nothing there
@@ -37,11 +43,12 @@ _INFO = 11  # per slab and LR pixel: RGBA box low (4) and high (4), motion (2), 
 
 
 @numba.njit(parallel=True, **_NB)
-def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, dst):
+def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, box, dst):
     """Per slab and LR pixel of ``src`` (K, h, w, C): over it and its two neighbours in its row (``vertical``: its
     column), the minimum of the four channels from ``lo_at``, the maximum of the four from ``hi_at`` and, of the
     most opaque of the three (alpha at ``alpha_at``; the first among equals, from the left or the top), the alpha
-    and the motion at ``motion_at``, into ``dst`` (K, h, w, _INFO): low 0-3, high 4-7, motion 8-9, alpha 10."""
+    and the motion at ``motion_at``, into ``dst`` (K, h, w, _INFO): low 0-3, high 4-7, motion 8-9, alpha 10.
+    Without ``box`` the minima and maxima are skipped (low and high left at +1e30 and -1e30)."""
     n_slabs, h, w = src.shape[0], src.shape[1], src.shape[2]
     dy, dx = (1, 0) if vertical else (0, 1)
     for j in numba.prange(h):
@@ -55,10 +62,11 @@ def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, dst):
                     y, x = j + n * dy, i + n * dx
                     if y < 0 or y >= h or x < 0 or x >= w:
                         continue
-                    lo0, lo1 = min(lo0, src[k, y, x, lo_at]), min(lo1, src[k, y, x, lo_at + 1])
-                    lo2, lo3 = min(lo2, src[k, y, x, lo_at + 2]), min(lo3, src[k, y, x, lo_at + 3])
-                    hi0, hi1 = max(hi0, src[k, y, x, hi_at]), max(hi1, src[k, y, x, hi_at + 1])
-                    hi2, hi3 = max(hi2, src[k, y, x, hi_at + 2]), max(hi3, src[k, y, x, hi_at + 3])
+                    if box:
+                        lo0, lo1 = min(lo0, src[k, y, x, lo_at]), min(lo1, src[k, y, x, lo_at + 1])
+                        lo2, lo3 = min(lo2, src[k, y, x, lo_at + 2]), min(lo3, src[k, y, x, lo_at + 3])
+                        hi0, hi1 = max(hi0, src[k, y, x, hi_at]), max(hi1, src[k, y, x, hi_at + 1])
+                        hi2, hi3 = max(hi2, src[k, y, x, hi_at + 2]), max(hi3, src[k, y, x, hi_at + 3])
                     if src[k, y, x, alpha_at] > best:
                         best, mx, my = src[k, y, x, alpha_at], src[k, y, x, motion_at], src[k, y, x, motion_at + 1]
                 dst[k, j, i, 0], dst[k, j, i, 1], dst[k, j, i, 2], dst[k, j, i, 3] = lo0, lo1, lo2, lo3
@@ -67,14 +75,15 @@ def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, dst):
 
 
 @numba.njit(parallel=True, **_NB)
-def _prepass(slabs, across, info):
+def _prepass(slabs, box, across, info):
     """Per slab and LR pixel of ``slabs`` (K, h, w, SLAB_CHANNELS): the 3x3 neighbourhood's RGBA min/max, the
     motion vector the HR pixels nearest it take (its own where its slab shows something, else that of the most
     opaque neighbour, the first in row order among equals) and whether any of the nine shows something, into
-    ``info`` (K, h, w, _INFO); separably (:func:`_widen`): three pixels of each row first (into the work buffer
-    ``across``, of ``info``'s shape), then three rows of those, then each pixel's own motion where it shows."""
-    _widen(slabs, SLAB_RGBA, SLAB_RGBA, SLAB_RGBA + 3, SLAB_MOTION, False, across)
-    _widen(across, 0, 4, 10, 8, True, info)
+    ``info`` (K, h, w, _INFO); the min/max only with ``box`` (a frame that rectifies: 0.47 against 0.27 ms for
+    two 128² slabs); separably (:func:`_widen`): three pixels of each row first (into the work buffer ``across``,
+    of ``info``'s shape), then three rows of those, then each pixel's own motion where it shows."""
+    _widen(slabs, SLAB_RGBA, SLAB_RGBA, SLAB_RGBA + 3, SLAB_MOTION, False, box, across)
+    _widen(across, 0, 4, 10, 8, True, box, info)
     n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
     for j in numba.prange(h):
         for k in range(n_slabs):
@@ -155,13 +164,17 @@ def _kernel(history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, te
 class LayeredUpsampler(TemporalUpsampler):
     """Temporal upsampling of jittered LR frames cut into depth slabs, one history per slab (one call per frame).
 
-    The constructor is :class:`~volsr_core.temporal.taau.TemporalUpsampler`'s, with ``sigma`` 0.25 LR px by
-    default (measured: docs/temporal.md, "Layered history"); the number of slabs is the frames' own
+    The constructor is :class:`~volsr_core.temporal.taau.TemporalUpsampler`'s, with ``sigma`` 0.25 LR px,
+    ``cap_angle`` 0.3 degrees and ``smooth_count`` 0.5 by default (measured: docs/temporal.md, "Layered history"
+    and "A shorter history"; where frames sample finely the cap falls by half, not to a quarter, which keeps it
+    where it was before the shorter cap: 0.26 against 0.25 at 4x and 2°); the number of slabs is the frames' own
     (``RayCaster.render(..., slabs=K)``).
     """
 
-    def __init__(self, scale: int, *, sigma: float = 0.25, **settings):
-        super().__init__(scale, sigma=sigma, side_outputs=False, **settings)
+    def __init__(self, scale: int, *, sigma: float = 0.25, cap_angle: float = 0.3, smooth_count: float = 0.5,
+                 **settings):
+        super().__init__(scale, sigma=sigma, cap_angle=cap_angle, smooth_count=smooth_count, side_outputs=False,
+                         **settings)
         self._info: np.ndarray | None = None  # the prepass's results, and its work buffer
         self._across: np.ndarray | None = None
 
@@ -186,17 +199,19 @@ class LayeredUpsampler(TemporalUpsampler):
         has = self.history is not None and self.history.shape == shape
         history = self.history if has else np.zeros((1, 1, 1, 5), dtype=np.float32)
         motion = slabs.reshape(n_slabs * h, w, SLAB_CHANNELS)[..., SLAB_MOTION:SLAB_MOTION + 2]
-        static, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
+        moves = _moves(motion, 1e-3)
+        static, sigma, cap, tent = self._frame_settings(moves, has, rotation, pixels_per_voxel)
+        rectify = not static and self._rotation(moves, rotation) < STILL_BELOW
         cols, runs = self._columns(w, jx, sigma)
         if self._info is None or self._info.shape[:3] != (n_slabs, h, w):
             self._info = np.empty((n_slabs, h, w, _INFO), dtype=np.float32)
             self._across = np.empty_like(self._info)
-        _prepass(slabs, self._across, self._info)
+        _prepass(slabs, rectify, self._across, self._info)
         new_history = self._spare if self._spare is not None and self._spare.shape == shape else \
             np.empty(shape, dtype=np.float32)
         out = np.empty((h * s, w * s, 3), dtype=np.float32)
         _kernel(history, has, slabs, self._info, cols, runs, s, jy, 1.0 / (2.0 * sigma * sigma), tent, cap,
-                not static, np.asarray(background, dtype=np.float32), out, new_history)
+                rectify, np.asarray(background, dtype=np.float32), out, new_history)
         self._spare = self.history if has else None
         self.history = new_history
         return out

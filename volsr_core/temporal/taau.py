@@ -51,6 +51,7 @@ import numpy as np
 from volsr_core.temporal.color import clip_to_box, to_rgb, to_ycocg
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
+STILL_BELOW = 1e-6  # degrees: a view rotating less than this between frames is still (a still camera, a pan, a zoom)
 
 
 @numba.njit(**_NB)
@@ -359,15 +360,20 @@ class TemporalUpsampler:
         lo, hi = self.smooth_between
         return min(max((pixels_per_voxel * self.scale - lo) / (hi - lo), 0.0), 1.0)
 
+    def _rotation(self, moves: bool, rotation: float | None) -> float:
+        """This frame's view rotation in degrees (>= 0): ``rotation``, or where it is unknown (None) 0 when nothing
+        moves and else ``assumed_rotation`` (a brisk one)."""
+        if rotation is None:
+            return self.assumed_rotation if moves else 0.0
+        return max(float(rotation), 0.0)
+
     def _frame_settings(self, moves: bool, has_history: bool, rotation: float | None,
                         pixels_per_voxel: float | None) -> tuple[bool, float, float, float]:
         """This frame's (static, sigma in LR px, history cap, tent share), from whether any motion vector moves,
         whether there is a history, the view's rotation (degrees, None: unknown) and the pixels per voxel."""
         static = not moves  # nothing moves at all (or no previous frame)
-        if rotation is None:  # unknown: still only when nothing moves, else assume a brisk rotation
-            rotation = 0.0 if static else self.assumed_rotation
-        rotation = max(float(rotation), 0.0)
-        still = rotation < 1e-6  # no view rotation: a still camera, a pan, a zoom
+        rotation = self._rotation(moves, rotation)
+        still = rotation < STILL_BELOW  # no view rotation: a still camera, a pan, a zoom
         static = static and still and has_history
         sigma = (self.static_sigma_hr if static else self.still_sigma_hr) / self.scale if still else self.sigma
         cap = self.still_count if still else self.max_count / (1.0 + rotation / self.cap_angle)
