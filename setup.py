@@ -28,9 +28,9 @@ setup(
         "pyvista": ["pyvista>=0.43"],
         "torch": ["torch>=2.6,<3", "scikit-image>=0.22", "matplotlib>=3.7"],
         "onnx": ["onnxruntime>=1.17", "onnx>=1.17", "onnxscript>=0.5"],  # onnxscript: export (with torch)
-        # numba-cuda up to 0.30 overloads np.row_stack, which NumPy 2.5 removed: importing it there fails
-        # (seen on the lent H100's image, NumPy 2.5.2); the combination below imports and compiles
-        "cuda": ["numba-cuda>=0.20,<0.31", "numpy>=1.24,<2.5"],
+        # numba-cuda up to 0.30 overloads np.row_stack, which NumPy 2.5 removed; render/cuda.py gives NumPy the name
+        # back before importing it (seen compiling and matching the CPU on the lent H200: NumPy 2.5.2, numba-cuda 0.30.4)
+        "cuda": ["numba-cuda>=0.20,<0.31"],
         "video": ["imageio>=2.30", "imageio-ffmpeg>=0.4"],  # volsr upscale --video (MP4 through ffmpeg)
         "dev": ["pytest>=8", "pytest-xdist>=3", "scikit-image>=0.22", "matplotlib>=3.7", "numba-cuda>=0.20"],
     },

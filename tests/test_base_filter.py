@@ -156,6 +156,23 @@ def test_an_xs_pipeline_in_depth_slabs_filters_the_layered_taau_estimate(tmp_pat
         Pipeline(volume, get_preset("CT-Phantom"), s_model, scale=2, slabs=2)
 
 
+def test_the_shipped_xs_4x_refines_the_layered_taau_in_torch_as_in_its_cpu_kernel():
+    """volsr-XS-4x.pt (torch, as on a GPU, where no CPU kernel runs the filter) runs on the two depth slabs it was
+    fitted on, as the .onnx through the CPU kernel does: the same images; with slabs=0 (the TAAU) they differ."""
+    from volsr_core.runtime.models import model_file
+
+    volume = Volume.from_record(make_phantom(shape=(48, 48, 48), spacing=(2.0, 2.0, 2.0)))
+    runs = {}
+    for name, kind, slabs in (("kernel", "onnx", None), ("torch", "pt", None), ("torch, TAAU", "pt", 0)):
+        pipeline = Pipeline(volume, get_preset("CT-Phantom"), model_file("XS", 4, kind), scale=4, size=(64, 48),
+                            threads=2, slabs=slabs)
+        assert (getattr(pipeline.engine, "base_filter", None) is not None) == (kind == "onnx")
+        cameras = orbit_around(pipeline.caster.visible_bounds(), 4, 3.0)
+        runs[name] = np.stack([pipeline.render(camera) for camera in cameras])
+    assert np.abs(runs["torch"] - runs["kernel"]).max() < 1e-5
+    assert np.abs(runs["torch, TAAU"] - runs["kernel"]).max() > 0.02
+
+
 def test_xs_at_4x_and_more_runs_in_two_depth_slabs_unless_told_otherwise(tmp_path):
     """The default slabs (None): those an XS model was fitted on (``taau_slabs``, read from the ONNX file), else two
     for XS on TAAU at 4x and 8x, none for XS 2x, XS on the bilinear upscale or a U-Net model; slabs=0 gives the

@@ -247,7 +247,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
             raise InputError(model, f"the model upscales {model_scale}x, not {scale}x (--scale)")
         if args.slabs and not takes_slabs(engine):
             raise InputError(model, f"takes no depth slabs (--slabs {args.slabs}): only a base-filter model on TAAU "
-                             "(variant XS, on the CPU) refines the layered TAAU")
+                             "(variant XS) refines the layered TAAU")
         scale = model_scale
 
     for part in stale_parts(out / "summary.md"):  # left by a killed run

@@ -72,11 +72,10 @@ LAYERED_FROM_SCALE = 4  # the smallest scale it is the default at: at 2x TAAU's 
 
 
 def takes_slabs(engine: Any) -> bool:
-    """Whether ``engine``'s model can refine the layered TAAU: a base filter run on the CPU (variant XS) whose
-    history is a TAAU estimate of colour alone (no side outputs)."""
+    """Whether ``engine``'s model can refine the layered TAAU: a base filter (variant XS, no U-Net) whose history is
+    a TAAU estimate of colour alone (no side outputs), whichever engine runs it (the CPU kernel, torch, a GPU)."""
     config = engine.config
-    return (getattr(engine, "base_filter", None) is not None and history_mode(config) == "taau"
-            and not getattr(config, "taau_aux", False))
+    return not config.widths and history_mode(config) == "taau" and not getattr(config, "taau_aux", False)
 
 
 def default_slabs(engine: Any) -> int:
@@ -191,7 +190,8 @@ class StatefulUpscaler:
         vectors = np.stack([f[1] for f in held])[None]
         jitters = np.stack([f[2] for f in held])[None]
         parts = self.history.parts(frame.color, motion.transpose(1, 2, 0), tuple(jitter), frame.motion_depth,
-                                   view_rotation(frame.camera, frame.previous_camera), frame.pixels_per_voxel)
+                                   view_rotation(frame.camera, frame.previous_camera), frame.pixels_per_voxel,
+                                   slabs=frame.slabs, background=background)
         history = None
         if parts is not None:  # (1, C, H, W) in a buffer kept between frames: the engine reads it during the call
             shape = (sum(part.shape[2] for part in parts),) + parts[0].shape[:2]
