@@ -4,6 +4,7 @@ filter and against the identity it starts as."""
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,7 @@ from volsr_core.io import make_phantom  # noqa: E402
 from volsr_core.render.features import FeatureFrame  # noqa: E402
 from volsr_core.render.layout import OUT_CHANNELS  # noqa: E402
 from volsr_core.runtime.base_filter import FILTER_KEY, Scratch, filter_image  # noqa: E402
-from volsr_core.runtime.engines import OnnxEngine  # noqa: E402
+from volsr_core.runtime.engines import OnnxEngine, TorchEngine  # noqa: E402
 from volsr_core.runtime.export import example_inputs, export_onnx  # noqa: E402
 from volsr_core.runtime.pipeline import Pipeline  # noqa: E402
 from volsr_core.runtime.upscaler import StatefulUpscaler  # noqa: E402
@@ -99,6 +100,14 @@ def test_an_xs_model_runs_its_filter_in_the_kernel_and_agrees_with_its_onnx_grap
     assert np.abs(engine(lr, motion, jitter, history) - graph).max() < 1e-5
     s_model = SuperResolutionNet(variant_config("S", 4, 0, taau_base=True, taau_aux=True))
     assert OnnxEngine(export_onnx(s_model, tmp_path / "s.onnx"), providers=["CPUExecutionProvider"]).base_filter is None
+    # the kernel whatever the providers (a GPU one is refused here: onnxruntime falls back to the CPU), and from torch
+    with warnings.catch_warnings():  # onnxruntime warns of the provider it does not have
+        warnings.simplefilter("ignore", UserWarning)
+        gpu_first = OnnxEngine(tmp_path / "xs.onnx", providers=["CUDAExecutionProvider", "CPUExecutionProvider"])
+    assert gpu_first.base_filter is not None
+    for got, want in zip(TorchEngine(net).base_filter, engine.base_filter):
+        assert got.shape == want.shape and np.abs(got - want).max() < 1e-6
+    assert TorchEngine(s_model).base_filter is None
 
 
 def test_damaged_filter_weights_in_the_metadata_are_a_one_line_error(tmp_path):
@@ -156,21 +165,27 @@ def test_an_xs_pipeline_in_depth_slabs_filters_the_layered_taau_estimate(tmp_pat
         Pipeline(volume, get_preset("CT-Phantom"), s_model, scale=2, slabs=2)
 
 
-def test_the_shipped_xs_4x_refines_the_layered_taau_in_torch_as_in_its_cpu_kernel():
-    """volsr-XS-4x.pt (torch, as on a GPU, where no CPU kernel runs the filter) runs on the two depth slabs it was
-    fitted on, as the .onnx through the CPU kernel does: the same images; with slabs=0 (the TAAU) they differ."""
+def test_the_shipped_xs_4x_runs_its_filter_in_the_kernel_on_its_depth_slabs_from_either_file():
+    """volsr-XS-4x.pt (torch) hands its filter to the CPU kernel as the .onnx does, and both run on the two depth slabs
+    the filter was fitted on: the same images. Through its graph instead (an engine without the kernel's weights,
+    as ONNX files without them run) it still refines the layered TAAU: the same images again; with slabs=0 (the
+    TAAU) they differ."""
     from volsr_core.runtime.models import model_file
 
     volume = Volume.from_record(make_phantom(shape=(48, 48, 48), spacing=(2.0, 2.0, 2.0)))
     runs = {}
-    for name, kind, slabs in (("kernel", "onnx", None), ("torch", "pt", None), ("torch, TAAU", "pt", 0)):
+    for name, kind, slabs in (("onnx", "onnx", None), ("pt", "pt", None), ("pt graph", "pt", None),
+                              ("pt graph, TAAU", "pt", 0)):
         pipeline = Pipeline(volume, get_preset("CT-Phantom"), model_file("XS", 4, kind), scale=4, size=(64, 48),
                             threads=2, slabs=slabs)
-        assert (getattr(pipeline.engine, "base_filter", None) is not None) == (kind == "onnx")
+        assert pipeline.engine.base_filter is not None and pipeline.slabs == (2 if slabs is None else 0)
+        if "graph" in name:
+            pipeline.upscaler.base_filter = pipeline.engine.base_filter = None
         cameras = orbit_around(pipeline.caster.visible_bounds(), 4, 3.0)
         runs[name] = np.stack([pipeline.render(camera) for camera in cameras])
-    assert np.abs(runs["torch"] - runs["kernel"]).max() < 1e-5
-    assert np.abs(runs["torch, TAAU"] - runs["kernel"]).max() > 0.02
+    assert np.abs(runs["pt"] - runs["onnx"]).max() < 1e-5
+    assert np.abs(runs["pt graph"] - runs["onnx"]).max() < 1e-5
+    assert np.abs(runs["pt graph, TAAU"] - runs["onnx"]).max() > 0.02
 
 
 def test_xs_at_4x_and_more_runs_in_two_depth_slabs_unless_told_otherwise(tmp_path):

@@ -6,9 +6,10 @@
 The lent machine (the ``device`` tool, docs/performance-gpu.md) has torch, numba-cuda and onnxruntime
 (CPU provider only) but not SimpleITK or pydicom: ``pack`` writes each volume's ``VolumeRecord`` as
 ``<file name>.npz`` (voxels, spacing, origin, direction; lossless), and ``run`` reads those in place of the
-files, so rows carry the same names as the CPU runs'. Models: the .pt files (ONNX would run on the CPU
-provider there). ``run`` writes ``OUT/bench_<size>_<degrees>.json`` after each volume, so a run cut short
-keeps what it finished; ``bench.md`` and ``bench.png`` are made from it afterwards
+files, so rows carry the same names as the CPU runs'. Models: the .pt files, the U-Nets on torch CUDA
+(ONNX would run them on the CPU provider there), XS in the CPU kernel (from either file since 2026-11-26).
+``run`` writes ``OUT/bench_<size>_<degrees>.json`` after each volume, so a run cut short keeps what it
+finished; ``bench.md`` and ``bench.png`` are made from it afterwards
 (``volsr_core.apps.bench.report.write_outputs``). ``benchmarks/device/run.sh`` is the device command.
 """
 from __future__ import annotations

@@ -51,7 +51,9 @@ class OnnxEngine:
     ``threads`` sets onnxruntime's intra-op threads (default: its own choice). A network that is
     only its base filter (variant XS) runs on the CPU in :func:`~volsr_core.runtime.base_filter.
     filter_image` instead of the session (the same sums, a few times faster), with the weights
-    from the file's metadata in ``base_filter``; None for every other network.
+    from the file's metadata in ``base_filter``, whichever providers are given: its input and output
+    live in host memory, and a GPU round trip costs more than the filter (docs/performance-gpu.md);
+    None for every other network.
     """
 
     def __init__(self, path: str | os.PathLike, providers: Sequence[str] | None = None, fp16: bool = False,
@@ -88,7 +90,7 @@ class OnnxEngine:
         self.input_names = [i.name for i in self.session.get_inputs()]
         self.base_filter = None  # (weights (n, 3, k, k), bias (n, 3)) when the CPU kernel runs the network
         self._scratch = Scratch()  # the kernel's work buffers, kept between calls
-        if not self.config.widths and FILTER_KEY in meta and self.providers[0] == "CPUExecutionProvider":
+        if not self.config.widths and FILTER_KEY in meta:
             self.base_filter = read_filter_metadata(meta[FILTER_KEY], self.path, self.config.base_kernel,
                                                     self.config.base_orientations)
 
@@ -108,7 +110,10 @@ class OnnxEngine:
 
 
 class TorchEngine:
-    """The PyTorch network behind the same call: numpy in, numpy out, no gradients."""
+    """The PyTorch network behind the same call: numpy in, numpy out, no gradients. A network that is only its base
+    filter (variant XS) also hands its weights over as ``base_filter``, as :class:`OnnxEngine` does, so that the
+    upscaler runs it in the CPU kernel on any ``device`` (on a lent H200 the round trip through the GPU cost 17.6-19.6
+    ms a frame at 1024² beyond TAAU 2x: docs/performance-gpu.md); None for every other network."""
 
     def __init__(self, model, device: str = "cpu"):
         require_extra("torch", "running a PyTorch model")
@@ -119,11 +124,15 @@ class TorchEngine:
         self.model = model.to(self.device).eval()
         self.config = model.config
         self.providers = [f"torch:{self.device}"]
+        self.base_filter = None  # (weights (n, 3, k, k), bias (n, 3)) for the CPU kernel
+        if not self.config.widths and getattr(model, "base_filter", None) is not None:
+            self.base_filter = tuple(np.ascontiguousarray(t.float().cpu().numpy()) for t in model.base_filter.weights())
 
     def __call__(self, lr: np.ndarray, motion: np.ndarray, jitter: np.ndarray,
                  history: np.ndarray | None = None) -> np.ndarray:
         torch = self.torch
-        args = [torch.from_numpy(np.ascontiguousarray(v, dtype=np.float32)).to(self.device) for v in (lr, motion, jitter)]
+        args = [torch.from_numpy(np.ascontiguousarray(v, dtype=np.float32)).to(self.device)
+                for v in (lr, motion, jitter)]
         if self.config.takes_history and history is not None:
             args.append(torch.from_numpy(np.ascontiguousarray(history, dtype=np.float32)).to(self.device))
         with torch.no_grad():
