@@ -102,6 +102,20 @@ def dataset_config(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.fixture(scope="module")
+def compiled(tmp_path_factory, dataset_config) -> None:
+    """The commands the file-size limits below stop run once unlimited first, so that their kernels are compiled
+    and in numba's on-disk cache: a cold cache is written on the first run (tens of KB, next to the sources), which
+    a limit of a few KB stops before the output the tests are about (under pytest-xdist these tests can come
+    before any other test compiled them)."""
+    out = tmp_path_factory.mktemp("compiled")
+    for argv in (["render", "--size", "16", "--orbit", "2", "--features", "--out", out / "frames"],
+                 ["upscale", "--size", "32", "--orbit", "2", "--out", out / "up", "--video", out / "up" / "up.mp4"],
+                 ["dataset", dataset_config, "--out", out / "data"]):
+        result = volsr(*argv)
+        assert result.returncode == 0, result.stderr[-3000:]
+
+
 # -- outputs that cannot be written ---------------------------------------------------------------------
 def outputs_under(root: Path, dataset_config: Path) -> list[tuple[list, Path]]:
     """(argv, the path the error must name) of every command writing into ``root``, which is unwritable."""
@@ -141,7 +155,7 @@ def test_a_read_only_folder_by_permissions(tmp_path, dataset_config):
         root.chmod(0o755)
 
 
-def test_a_full_disk_during_render_leaves_no_partial_file(tmp_path):
+def test_a_full_disk_during_render_leaves_no_partial_file(tmp_path, compiled):
     out = tmp_path / "out"
     out.mkdir()
     assert_refused(volsr("render", "--size", "64", "--out", out / "view.png", file_size_limit=1000),
@@ -152,7 +166,7 @@ def test_a_full_disk_during_render_leaves_no_partial_file(tmp_path):
     assert [p for p in out.rglob("*") if p.is_file()] == []
 
 
-def test_a_full_disk_during_dataset_is_one_line_and_the_next_run_completes(tmp_path, dataset_config):
+def test_a_full_disk_during_dataset_is_one_line_and_the_next_run_completes(tmp_path, dataset_config, compiled):
     from volsr_core.dataset.store import validate_manifest
 
     out = tmp_path / "data"
@@ -170,7 +184,7 @@ def test_a_dataset_that_cannot_fit_is_refused_before_rendering(tmp_path, mounts,
     assert_refused(result, f"{out / 'data'}: not enough free space: 3 videos need about")
 
 
-def test_a_full_disk_during_upscale_stops_the_batch(tmp_path):
+def test_a_full_disk_during_upscale_stops_the_batch(tmp_path, compiled):
     out = tmp_path / "up"
     result = volsr("upscale", "--size", "32", "--orbit", "2", "--out", out, "--video", out / "movie.mp4",
                    file_size_limit=500)
