@@ -45,10 +45,9 @@ demo: $(STAMP)
 		--reference-spp 8 --out out/demo
 	cat out/demo/summary.md
 
-## the test suite (the data in ../shared/data is used when present; under CI=true it must be), in two worker processes
-## (pytest-xdist), each file in one of them: 9 minutes on the 2-core machine against 16 in one (2026-11-26)
+## the test suite (the data in ../shared/data is used when present; under CI=true it must be)
 test: $(STAMP) $(if $(PVPYTHON),$(PV_STAMP))
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q
 
 ## renderer vs VTK's CPU ray caster on the shared volumes (not part of the tests)
 bench: $(STAMP)
