@@ -35,7 +35,7 @@ import numba
 import numpy as np
 
 from volsr_core.render.layout import SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA
-from volsr_core.temporal.taau import STILL_BELOW, TemporalUpsampler, _moves, _row_window, _splat_weights
+from volsr_core.temporal.taau import TemporalUpsampler, _moves, _row_window, _splat_weights
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
 _EMPTY = 1e-4  # a slab with at most this alpha at an LR sample shows nothing there
@@ -199,9 +199,8 @@ class LayeredUpsampler(TemporalUpsampler):
         has = self.history is not None and self.history.shape == shape
         history = self.history if has else np.zeros((1, 1, 1, 5), dtype=np.float32)
         motion = slabs.reshape(n_slabs * h, w, SLAB_CHANNELS)[..., SLAB_MOTION:SLAB_MOTION + 2]
-        moves = _moves(motion, 1e-3)
-        static, sigma, cap, tent = self._frame_settings(moves, has, rotation, pixels_per_voxel)
-        rectify = not static and self._rotation(moves, rotation) < STILL_BELOW
+        static, still, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
+        rectify = still and not static  # the clamp only under a pan or a zoom (see the module docstring)
         cols, runs = self._columns(w, jx, sigma)
         if self._info is None or self._info.shape[:3] != (n_slabs, h, w):
             self._info = np.empty((n_slabs, h, w, _INFO), dtype=np.float32)

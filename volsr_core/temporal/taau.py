@@ -368,9 +368,10 @@ class TemporalUpsampler:
         return max(float(rotation), 0.0)
 
     def _frame_settings(self, moves: bool, has_history: bool, rotation: float | None,
-                        pixels_per_voxel: float | None) -> tuple[bool, float, float, float]:
-        """This frame's (static, sigma in LR px, history cap, tent share), from whether any motion vector moves,
-        whether there is a history, the view's rotation (degrees, None: unknown) and the pixels per voxel."""
+                        pixels_per_voxel: float | None) -> tuple[bool, bool, float, float, float]:
+        """This frame's (static, still, sigma in LR px, history cap, tent share), from whether any motion vector
+        moves, whether there is a history, the view's rotation (degrees, None: unknown) and the pixels per voxel;
+        still: the view does not rotate (a still camera, a pan, a zoom), static: nothing moves at all."""
         static = not moves  # nothing moves at all (or no previous frame)
         rotation = self._rotation(moves, rotation)
         still = rotation < STILL_BELOW  # no view rotation: a still camera, a pan, a zoom
@@ -379,7 +380,7 @@ class TemporalUpsampler:
         cap = self.still_count if still else self.max_count / (1.0 + rotation / self.cap_angle)
         smooth = 0.0 if still else self.smoothing(pixels_per_voxel)
         cap *= 1.0 - (1.0 - self.smooth_count) * smooth
-        return static, sigma, cap, self.smooth_tent * smooth
+        return static, still, sigma, cap, self.smooth_tent * smooth
 
     def _columns(self, lr_w: int, jx: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
         """:func:`_columns` of this LR width, horizontal jitter and sigma, kept between frames (the Halton
@@ -433,7 +434,7 @@ class TemporalUpsampler:
         shape = (h * s, w * s, 5)
         has = self.history is not None and self.history.shape == shape
         history = self.history if has else np.zeros((1, 1, 5), dtype=np.float32)
-        static, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
+        static, _, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
         inv2s2 = 1.0 / (2.0 * sigma * sigma)
         cols, runs = self._columns(w, jx, sigma)
         if self._box is None or self._box.shape[:2] != (h, w):
