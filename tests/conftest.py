@@ -26,6 +26,16 @@ def shared_data() -> Path:
 
 
 @pytest.fixture(scope="session")
+def model() -> Path:
+    """The shipped VolSR S 4x ONNX file (SHA-256 checked): a trained U-Net, whose every weight shapes its output, for
+    tests that need a network file but not a particular one (exporting one takes 15-30 s on the 2-core machine)."""
+    pytest.importorskip("onnxruntime")
+    from volsr_core.runtime.models import model_file
+
+    return model_file("S", 4, "onnx")
+
+
+@pytest.fixture(scope="session")
 def headsq_dicom(shared_data: Path) -> Path:
     return shared_data / "volumes" / "headsq_dicom"
 

@@ -21,6 +21,7 @@ from volsr_core.render.layout import OUT_CHANNELS  # noqa: E402
 from volsr_core.runtime.base_filter import FILTER_KEY, Scratch, filter_image  # noqa: E402
 from volsr_core.runtime.engines import OnnxEngine, TorchEngine  # noqa: E402
 from volsr_core.runtime.export import example_inputs, export_onnx  # noqa: E402
+from volsr_core.runtime.models import model_file  # noqa: E402
 from volsr_core.runtime.pipeline import Pipeline  # noqa: E402
 from volsr_core.runtime.upscaler import StatefulUpscaler  # noqa: E402
 from volsr_core.scene.camera import Camera  # noqa: E402
@@ -99,7 +100,7 @@ def test_an_xs_model_runs_its_filter_in_the_kernel_and_agrees_with_its_onnx_grap
                                       if name in engine.input_names})[0]
     assert np.abs(engine(lr, motion, jitter, history) - graph).max() < 1e-5
     s_model = SuperResolutionNet(variant_config("S", 4, 0, taau_base=True, taau_aux=True))
-    assert OnnxEngine(export_onnx(s_model, tmp_path / "s.onnx"), providers=["CPUExecutionProvider"]).base_filter is None
+    assert OnnxEngine(model_file("S", 4), providers=["CPUExecutionProvider"]).base_filter is None  # a U-Net's file
     # the kernel whatever the providers (a GPU one is refused here: onnxruntime falls back to the CPU), and from torch
     with warnings.catch_warnings():  # onnxruntime warns of the provider it does not have
         warnings.simplefilter("ignore", UserWarning)
@@ -160,9 +161,8 @@ def test_an_xs_pipeline_in_depth_slabs_filters_the_layered_taau_estimate(tmp_pat
         expected = np.clip(filter_image(estimate, *pipeline.engine.base_filter), 0.0, 1.0)
         assert np.abs(image - expected).max() < 1e-6
         previous = camera
-    s_model = export_onnx(SuperResolutionNet(variant_config("S", 2, taau_base=True)), tmp_path / "s.onnx")
-    with pytest.raises(ValueError, match="depth slabs"):
-        Pipeline(volume, get_preset("CT-Phantom"), s_model, scale=2, slabs=2)
+    with pytest.raises(ValueError, match="depth slabs"):  # the shipped S 2x
+        Pipeline(volume, get_preset("CT-Phantom"), model_file("S", 2), scale=2, slabs=2)
 
 
 def test_the_shipped_xs_4x_runs_its_filter_in_the_kernel_on_its_depth_slabs_from_either_file():
@@ -170,8 +170,6 @@ def test_the_shipped_xs_4x_runs_its_filter_in_the_kernel_on_its_depth_slabs_from
     the filter was fitted on: the same images. Through its graph instead (an engine without the kernel's weights,
     as ONNX files without them run) it still refines the layered TAAU: the same images again; with slabs=0 (the
     TAAU) they differ."""
-    from volsr_core.runtime.models import model_file
-
     volume = Volume.from_record(make_phantom(shape=(48, 48, 48), spacing=(2.0, 2.0, 2.0)))
     runs = {}
     for name, kind, slabs in (("onnx", "onnx", None), ("pt", "pt", None), ("pt graph", "pt", None),
@@ -200,8 +198,9 @@ def test_xs_at_4x_and_more_runs_in_two_depth_slabs_unless_told_otherwise(tmp_pat
              "xs2fitted3": (variant_config("XS", 2, taau_base=True, taau_slabs=3), 3),  # the slabs it was fitted on
              "xs4bilinear": (variant_config("XS", 4), 0),
              "s4": (variant_config("S", 4, taau_base=True), 0)}
-    for name, (config, slabs) in cases.items():
-        engine = open_engine(export_onnx(SuperResolutionNet(config), tmp_path / f"{name}.onnx"))
+    for name, (config, slabs) in cases.items():  # the slabs it was fitted on read from its ONNX file, the rest in torch
+        model = SuperResolutionNet(config)
+        engine = open_engine(export_onnx(model, tmp_path / f"{name}.onnx") if name == "xs2fitted3" else model)
         assert default_slabs(engine) == slabs, name
         assert StatefulUpscaler(engine).slabs == slabs and StatefulUpscaler(engine, slabs=0).slabs == 0
     volume = Volume.from_record(make_phantom(shape=(48, 48, 48), spacing=(2.0, 2.0, 2.0)))

@@ -15,22 +15,19 @@ SPP, FACTORS, SCALES = [1, 4], [2, 3, 4, 6, 8], [2, 4, 8]
 
 
 @pytest.fixture(scope="module")
-def bench_run(tmp_path_factory):
-    """One small run through the CLI: phantom, 64², 4 frames (1 warm-up), 8-spp reference, an
-    untrained S 4x recurrent model exported to a models folder."""
-    torch = pytest.importorskip("torch")
-    pytest.importorskip("onnxruntime")
+def bench_run(tmp_path_factory, model):
+    """One small run through the CLI: phantom, 64², 4 frames (1 warm-up), 8-spp reference, a models folder holding a
+    copy of the shipped S 4x."""
+    import shutil
+
     pytest.importorskip("skimage")
     pytest.importorskip("matplotlib")
     from volsr_core.cli import main
-    from volsr_core.runtime.export import export_onnx
-    from volsr_core.sr.network import SuperResolutionNet, variant_config
 
     root = tmp_path_factory.mktemp("bench")
     models = root / "models"
     models.mkdir()
-    torch.manual_seed(0)
-    export_onnx(SuperResolutionNet(variant_config("S", 4, 0, recurrent=True)), models / "tiny.onnx")
+    shutil.copy(model, models / "s4.onnx")
     out = root / "out"
     status = main(["bench", "--size", "64", "--frames", "4", "--warmup", "1", "--reference-spp", "8",
                    "--spp", ",".join(map(str, SPP)), "--models-dir", str(models), "--out", str(out)])
@@ -56,7 +53,7 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
         assert len(r["psnr_frames"]) == 3  # 4 frames, 1 warm-up
         assert (r["ms_network"] == 0) == (r["method"] == "native")
     volsr = rows["VolSR S 4x"]  # scale and variant came from the ONNX metadata
-    assert (volsr["method"], volsr["variant"], volsr["scale"], volsr["model"]) == ("volsr", "S", 4, "tiny.onnx")
+    assert (volsr["method"], volsr["variant"], volsr["scale"], volsr["model"]) == ("volsr", "S", 4, "s4.onnx")
     assert results["settings"]["onnxruntime_threads"] == 2 and results["settings"]["measured_frames"] == 3
 
 

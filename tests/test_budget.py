@@ -1,5 +1,5 @@
 """Frame-budget rendering (runtime/budget.py): the level that fits the budget while moving, and progressive
-refinement to the native N-spp image while still. On the CPU, the phantom, small untrained models."""
+refinement to the native N-spp image while still. On the CPU, the phantom, the shipped S models."""
 from __future__ import annotations
 
 import re
@@ -8,30 +8,22 @@ import statistics
 import numpy as np
 import pytest
 
-pytest.importorskip("torch")
 pytest.importorskip("onnxruntime")
 
 from volsr_core.io import make_phantom  # noqa: E402
 from volsr_core.runtime.budget import BudgetRenderer, Level, levels, unpaid  # noqa: E402
-from volsr_core.runtime.export import export_onnx  # noqa: E402
-from volsr_core.runtime.models import PAYING_NETWORK_SHARE  # noqa: E402
+from volsr_core.runtime.models import PAYING_NETWORK_SHARE, model_file  # noqa: E402
 from volsr_core.scene import Volume, get_preset  # noqa: E402
 from volsr_core.scene.camera_paths import orbit_around  # noqa: E402
 from volsr_core.sr.metrics import psnr_ssim  # noqa: E402
-from volsr_core.sr.network import SuperResolutionNet, variant_config  # noqa: E402
 from volsr_core.temporal.supersample import render_supersampled  # noqa: E402
 
 SIZE = (192, 192)
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory):
-    import torch
-
-    torch.manual_seed(0)
-    folder = tmp_path_factory.mktemp("budget")
-    files = {Level(s, "S"): export_onnx(SuperResolutionNet(variant_config("S", s, 0, taau_base=True)),
-                                        folder / f"s{s}.onnx") for s in (2, 4)}
+def scene():
+    files = {Level(s, "S"): model_file("S", s) for s in (2, 4)}
     volume = Volume.from_record(make_phantom(shape=(96, 96, 96)))
     return volume, get_preset("CT-Phantom"), files
 

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from PIL import Image
 
-pytest.importorskip("torch")
 pytest.importorskip("onnxruntime")
 imageio = pytest.importorskip("imageio.v2")
 pytest.importorskip("imageio_ffmpeg")
@@ -18,17 +17,6 @@ from volsr_core.hashing import file_sha256  # noqa: E402
 from volsr_core.io import make_phantom  # noqa: E402
 from volsr_core.apps import upscale as batch  # noqa: E402
 from volsr_core.runtime import models  # noqa: E402
-from volsr_core.runtime.export import export_onnx  # noqa: E402
-from volsr_core.sr.network import SuperResolutionNet, variant_config  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def model_s4(tmp_path_factory):
-    import torch
-
-    torch.manual_seed(0)
-    return export_onnx(SuperResolutionNet(variant_config("S", 4, 0, recurrent=True)),
-                       tmp_path_factory.mktemp("model") / "s4.onnx")
 
 
 @pytest.fixture(scope="module")
@@ -59,9 +47,9 @@ def read_video(path):
         reader.close()
 
 
-def test_phantom_orbit_to_png_frames_and_mp4_with_psnr_summary(tmp_path, model_s4, capsys):
+def test_phantom_orbit_to_png_frames_and_mp4_with_psnr_summary(tmp_path, model, capsys):
     video = tmp_path / "movie.mp4"
-    code = main(["upscale", "--orbit", "3", "--size", "64", "--model", str(model_s4), "--out", str(tmp_path / "out"),
+    code = main(["upscale", "--orbit", "3", "--size", "64", "--model", str(model), "--out", str(tmp_path / "out"),
                  "--video", str(video), "--reference-spp", "2"])
     assert code == 0
     pngs = sorted((tmp_path / "out" / "phantom").glob("*.png"))
@@ -72,7 +60,7 @@ def test_phantom_orbit_to_png_frames_and_mp4_with_psnr_summary(tmp_path, model_s
     assert len(frames) == 3 and frames[0].shape == (64, 64, 3)
     assert np.abs(frames[0].astype(float) - images[0]).mean() < 12  # the MP4 holds the same pictures
     out = capsys.readouterr().out
-    assert "upscaled 1 of 1 input(s) 4x with s4.onnx" in out
+    assert "upscaled 1 of 1 input(s) 4x with volsr-S-4x.onnx" in out
     line = next(line for line in out.splitlines() if line.strip().startswith("phantom:"))
     assert "3 frames of 64x64 from 16x16" in line and "network" in line
     assert "mean PSNR vs 2-spp native" in line and "VolSR" in line and "bilinear" in line
@@ -83,8 +71,8 @@ def test_phantom_orbit_to_png_frames_and_mp4_with_psnr_summary(tmp_path, model_s
     assert not leftovers(tmp_path)
 
 
-def test_side_by_side_frames_are_three_panels_wide(tmp_path, model_s4):
-    code = main(["upscale", "--orbit", "2", "--size", "64x48", "--model", str(model_s4), "--side-by-side",
+def test_side_by_side_frames_are_three_panels_wide(tmp_path, model):
+    code = main(["upscale", "--orbit", "2", "--size", "64x48", "--model", str(model), "--side-by-side",
                  "--out", str(tmp_path), "--video", str(tmp_path / "sbs.mp4")])
     assert code == 0
     png = np.asarray(Image.open(tmp_path / "phantom" / "frame_0001.png"))
@@ -101,8 +89,8 @@ def test_side_by_side_frames_are_three_panels_wide(tmp_path, model_s4):
     assert native_row.split("|")[6].strip() == "1.00", "times are shown against the native 1-spp render's"
 
 
-def test_dicom_folder(tmp_path, model_s4, headsq_dicom, capsys):
-    code = main(["upscale", str(headsq_dicom), "--orbit", "2", "--size", "48", "--model", str(model_s4),
+def test_dicom_folder(tmp_path, model, headsq_dicom, capsys):
+    code = main(["upscale", str(headsq_dicom), "--orbit", "2", "--size", "48", "--model", str(model),
                  "--out", str(tmp_path), "--video", str(tmp_path / "videos")])
     assert code == 0
     pngs = sorted((tmp_path / "headsq_dicom").glob("frame_*.png"))
@@ -112,12 +100,12 @@ def test_dicom_folder(tmp_path, model_s4, headsq_dicom, capsys):
     assert "headsq_dicom: 2 frames of 48x48 from 12x12" in capsys.readouterr().out
 
 
-def test_bad_inputs_are_reported_while_the_good_ones_finish(tmp_path, model_s4, small_volume, capsys):
+def test_bad_inputs_are_reported_while_the_good_ones_finish(tmp_path, model, small_volume, capsys):
     bogus = tmp_path / "bogus.nrrd"
     bogus.write_text("this is not a volume\n")
     listing = tmp_path / "list.txt"
     listing.write_text(f"# volumes\n{small_volume}\nmissing.nii.gz\n\nbogus.nrrd\n")
-    code = main(["upscale", str(listing), str(small_volume), "--orbit", "2", "--size", "32", "--model", str(model_s4),
+    code = main(["upscale", str(listing), str(small_volume), "--orbit", "2", "--size", "32", "--model", str(model),
                  "--out", str(tmp_path / "out"), "--video", str(tmp_path / "out" / "all.mp4")])
     assert code == 1
     captured = capsys.readouterr()
@@ -125,7 +113,7 @@ def test_bad_inputs_are_reported_while_the_good_ones_finish(tmp_path, model_s4, 
     assert len(errors) == 2
     assert errors[0] == f"volsr: error: {tmp_path / 'missing.nii.gz'}: no such file or folder"
     assert errors[1].startswith(f"volsr: error: {bogus}: content does not look like a NRRD file")
-    assert "upscaled 2 of 4 input(s) 4x with s4.onnx, 2 failed" in captured.out
+    assert "upscaled 2 of 4 input(s) 4x with volsr-S-4x.onnx, 2 failed" in captured.out
     assert "missing: FAILED" in captured.out and "bogus: FAILED" in captured.out
     for name in ("small", "small_2"):  # the same file twice: two names
         assert len(list((tmp_path / "out" / name).glob("frame_*.png"))) == 2
@@ -134,18 +122,18 @@ def test_bad_inputs_are_reported_while_the_good_ones_finish(tmp_path, model_s4, 
     assert not leftovers(tmp_path)
 
 
-def test_bad_arguments_exit_2_with_one_line(tmp_path, model_s4, capsys):
+def test_bad_arguments_exit_2_with_one_line(tmp_path, model, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("x")
     assert main(["upscale", "--model", str(tmp_path / "none.onnx"), "--out", str(tmp_path)]) == 2
     assert "none.onnx: cannot read the model" in capsys.readouterr().err
-    assert main(["upscale", "--model", str(model_s4), "--scale", "2", "--out", str(tmp_path)]) == 2
+    assert main(["upscale", "--model", str(model), "--scale", "2", "--out", str(tmp_path)]) == 2
     assert "upscales 4x, not 2x" in capsys.readouterr().err
-    assert main(["upscale", "--model", str(model_s4), "--out", str(blocker)]) == 2
-    assert main(["upscale", "--model", str(model_s4), "--out", str(tmp_path), "--video", str(blocker / "x.mp4")]) == 2
+    assert main(["upscale", "--model", str(model), "--out", str(blocker)]) == 2
+    assert main(["upscale", "--model", str(model), "--out", str(tmp_path), "--video", str(blocker / "x.mp4")]) == 2
     assert "exists and is not a folder" in capsys.readouterr().err
-    assert main(["upscale", "--model", str(model_s4), "--slabs", "2", "--out", str(tmp_path)]) == 2
-    assert "s4.onnx: takes no depth slabs (--slabs 2)" in capsys.readouterr().err
+    assert main(["upscale", "--model", str(model), "--slabs", "2", "--out", str(tmp_path)]) == 2
+    assert "volsr-S-4x.onnx: takes no depth slabs (--slabs 2)" in capsys.readouterr().err
     assert main(["upscale", "--slabs", "1", "--budget-ms", "50", "--out", str(tmp_path)]) == 2
     assert "--slabs: --budget-ms runs each model with its own depth slabs" in capsys.readouterr().err
     with pytest.raises(SystemExit) as stopped:
@@ -169,13 +157,13 @@ def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("stop", [KeyboardInterrupt, RuntimeError])
-def test_an_interrupted_run_leaves_complete_files_only(tmp_path, model_s4, small_volume, stop):
+def test_an_interrupted_run_leaves_complete_files_only(tmp_path, model, small_volume, stop):
     from volsr_core.runtime.pipeline import Pipeline
     from volsr_core.scene import Camera, Volume, get_preset
     from volsr_core.scene.camera_paths import orbit
 
     volume = Volume.load(small_volume)
-    pipeline = Pipeline(volume, get_preset("CT-Bone").placed_on(*volume.percentiles()), model_s4, size=(32, 32))
+    pipeline = Pipeline(volume, get_preset("CT-Bone").placed_on(*volume.percentiles()), model, size=(32, 32))
     cameras = orbit(Camera.framing(volume.bounds), 4)
 
     def interrupt(i):
@@ -200,16 +188,13 @@ def test_auto_variant_rule(capsys):
 
 
 @pytest.fixture(scope="module")
-def registry_s_m(tmp_path_factory, model_s4):
-    """A models folder shipping S and M at 4x (untrained), as models.json lists them."""
+def registry_s_m(tmp_path_factory, model):
+    """A models folder shipping S and M at 4x (copies of the shipped ones), as models.json lists them."""
     import shutil
 
-    import torch
-
     folder = tmp_path_factory.mktemp("registry")
-    torch.manual_seed(1)
-    shutil.copy(model_s4, folder / "s4.onnx")
-    export_onnx(SuperResolutionNet(variant_config("M", 4, 0, recurrent=True)), folder / "m4.onnx")
+    shutil.copy(model, folder / "s4.onnx")
+    shutil.copy(models.model_file("M", 4), folder / "m4.onnx")
     entries = [{"name": f"volsr-{v.lower()}4", "variant": v, "scale": 4, "files": {"onnx": f"{v.lower()}4.onnx"},
                 "sha256": {"onnx": file_sha256(folder / f"{v.lower()}4.onnx")}} for v in ("S", "M")]
     (folder / "models.json").write_text(json.dumps({"models": entries}))

@@ -47,18 +47,6 @@ def paraview_venv() -> Path:
     return PV_VENV
 
 
-@pytest.fixture(scope="module")
-def model(tmp_path_factory) -> Path:
-    """A small untrained 4x network (zero residual on the TAAU base: deterministic, as tests/test_runtime.py)."""
-    pytest.importorskip("torch")
-    pytest.importorskip("onnx")
-    from volsr_core.runtime.export import export_onnx
-    from volsr_core.sr.network import SuperResolutionNet, variant_config
-
-    return export_onnx(SuperResolutionNet(variant_config("S", 4, 0, taau_base=True)),
-                       tmp_path_factory.mktemp("paraview_model") / "s4.onnx")
-
-
 def pvpython(*args: str, timeout: int = 600) -> subprocess.CompletedProcess:
     """`xvfb-run -a pvpython ARGS` from the repository, with ParaView's own X window (not the suite's EGL)."""
     env = dict(os.environ)

@@ -5,20 +5,14 @@ import numpy as np
 import pytest
 
 pv = pytest.importorskip("pyvista", reason="PyVista is not installed (pip install 'volsr[pyvista]')")
-pytest.importorskip("torch")
 pytest.importorskip("onnxruntime")
 
-from test_host_vtk import psnr, untrained_model  # noqa: E402
+from test_host_vtk import psnr  # noqa: E402
 
 from volsr_core.runtime.pipeline import Pipeline  # noqa: E402
 from volsr_core.scene import Volume, get_preset  # noqa: E402
 
 W, H = 128, 96
-
-
-@pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    return untrained_model(tmp_path_factory.mktemp("host_pyvista") / "s4.onnx")
 
 
 @pytest.fixture(scope="module")

@@ -7,14 +7,11 @@ import numpy as np
 import pytest
 
 pytest.importorskip("vtkmodules.vtkRenderingVolumeOpenGL2", reason="VTK is not installed (pip install 'volsr[vtk]')")
-torch = pytest.importorskip("torch")
 pytest.importorskip("onnxruntime")
 
 from volsr_core.io import make_phantom  # noqa: E402
-from volsr_core.runtime.export import export_onnx  # noqa: E402
 from volsr_core.runtime.pipeline import Pipeline  # noqa: E402
 from volsr_core.scene import Camera, Volume, get_preset  # noqa: E402
-from volsr_core.sr.network import SuperResolutionNet, variant_config  # noqa: E402
 
 W, H = 128, 96
 
@@ -23,21 +20,6 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     """PSNR in dB of two uint8 or [0, 1] images (capped at 100 dB for identical ones)."""
     a, b = (np.asarray(x, dtype=np.float64) / (255.0 if x.dtype == np.uint8 else 1.0) for x in (a, b))
     return float(10 * np.log10(1.0 / max(np.mean((a - b) ** 2), 1e-10)))
-
-
-def untrained_model(path):
-    """A small recurrent 4x network whose every weight matters (as tests/test_runtime.py makes it)."""
-    torch.manual_seed(0)
-    net = SuperResolutionNet(variant_config("S", 4, 0, recurrent=True)).eval()
-    with torch.no_grad():
-        for p in net.parameters():
-            p.add_(torch.randn_like(p) * 0.05)
-    return export_onnx(net, path)
-
-
-@pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    return untrained_model(tmp_path_factory.mktemp("host_vtk") / "s4.onnx")
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,8 @@
 """Runtime: ONNX export round trip, engines, the stateful upscaler's history, the pipeline."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -27,12 +29,28 @@ def perturbed(config):
     return net
 
 
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """``exported(config)``: the ONNX file of :func:`perturbed` ``config`` (the same weights every time), written
+    once per module: an export takes 15-30 s on the 2-core machine."""
+    files = {}
+
+    def export(config):
+        key = json.dumps(config.to_dict(), sort_keys=True)
+        if key not in files:
+            files[key] = export_onnx(perturbed(config), tmp_path_factory.mktemp("exported") / "m.onnx",
+                                     example_size=(8, 12))
+        return files[key]
+
+    return export
+
+
 @pytest.mark.parametrize("variant, scale, previous, recurrent, taau", [
     ("S", 4, 2, False, False), ("S", 4, 0, True, False), ("M", 2, 1, True, False), ("S", 8, 1, False, False),
     ("S", 4, 0, False, True)])
-def test_onnx_matches_torch_at_a_size_other_than_the_export_one(tmp_path, variant, scale, previous, recurrent, taau):
+def test_onnx_matches_torch_at_a_size_other_than_the_export_one(exported, variant, scale, previous, recurrent, taau):
     net = perturbed(variant_config(variant, scale, previous, recurrent=recurrent, taau_base=taau))
-    path = export_onnx(net, tmp_path / "m.onnx", example_size=(8, 12))
+    path = exported(net.config)  # exported at 8 x 12 LR pixels
     engine = OnnxEngine(path, providers=["CPUExecutionProvider"])
     assert engine.config == net.config
     inputs = example_inputs(net.config, 13, 10, batch=2)
@@ -124,7 +142,7 @@ def test_motion_statistics_are_numpys_median_and_offscreen_fraction(shape, step,
     assert offscreen == pytest.approx(float(np.mean((x < 0) | (x > w) | (y < 0) | (y > h))), abs=1e-12)
 
 
-def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(tmp_path):
+def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(exported):
     from volsr_core.io import make_phantom
     from volsr_core.runtime.pipeline import Pipeline
     from volsr_core.scene import Volume, get_preset
@@ -132,7 +150,7 @@ def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(tmp_p
     from volsr_core.temporal.jitter import halton_jitter, jitter_phases
 
     volume = Volume.from_record(make_phantom(shape=(48, 48, 48)))
-    model = export_onnx(perturbed(variant_config("S", 4, 1, recurrent=True)), tmp_path / "m.onnx")
+    model = exported(variant_config("S", 4, 2))  # two previous frames
     pipeline = Pipeline(volume, get_preset("CT-Phantom"), model, scale=4, size=(66, 50))
     assert pipeline.low_resolution_size == (17, 13)
     cameras = orbit(Camera.framing(volume.bounds), 3, degrees=6.0)
@@ -193,13 +211,13 @@ def test_a_network_with_taau_side_outputs_takes_seven_history_channels_and_start
         variant_config("S", 4, 0, taau_aux=True)
 
 
-def test_pipeline_update_is_the_one_sync_point_idempotent_with_reasons(tmp_path):
+def test_pipeline_update_is_the_one_sync_point_idempotent_with_reasons(exported):
     from volsr_core.io import make_phantom
     from volsr_core.runtime.pipeline import Pipeline
     from volsr_core.scene import Volume, get_preset
 
     volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
-    model = export_onnx(perturbed(variant_config("S", 4, 0, taau_base=True)), tmp_path / "m.onnx")
+    model = exported(variant_config("S", 4, 0, taau_base=True))
     tf = get_preset("CT-Phantom")
     pipeline = Pipeline(volume, tf, model, scale=4, size=(32, 32))
     camera = Camera.framing(volume.bounds)

@@ -506,23 +506,6 @@ def test_find_vtk_volume_takes_the_first_visible_one():
     assert find_vtk_volume(renderer) is shown
 
 
-@pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    """A small untrained S 4x network (the shipped models may not exist yet), its weights perturbed so
-    that the network, not only its TAAU base, shapes the output."""
-    pytest.importorskip("onnxruntime")
-    torch = pytest.importorskip("torch")
-    from volsr_core.runtime.export import export_onnx
-    from volsr_core.sr.network import SuperResolutionNet, variant_config
-
-    torch.manual_seed(0)
-    net = SuperResolutionNet(variant_config("S", 4, 0, taau_base=True)).eval()
-    with torch.no_grad():
-        for p in net.parameters():
-            p.add_(torch.randn_like(p) * 0.05)
-    return export_onnx(net, tmp_path_factory.mktemp("slicer") / "s4.onnx")
-
-
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
     """PSNR in dB of two uint8 or [0, 1] images (capped at 100 dB for identical ones)."""
     a, b = (np.asarray(x, dtype=np.float64) / (255.0 if x.dtype == np.uint8 else 1.0) for x in (a, b))
