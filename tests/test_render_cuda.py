@@ -1,4 +1,4 @@
-"""The CUDA build of the ray program agrees with the CPU build, depth slabs included.
+"""The CUDA build of the ray program agrees with the CPU build, depth slabs and the colour-only program included.
 
 Without a GPU this runs in Numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, set before numba is
 imported, hence the subprocess) on a tiny image; with a GPU set VOLSR_TEST_REAL_CUDA=1 to use it.
@@ -34,6 +34,11 @@ SCRIPT = textwrap.dedent("""
         err = max(np.abs(cpu.data - gpu.data).max(), np.abs(cpu.slabs - gpu.slabs).max())
         print(mode, jitter, "max abs difference", err)
         assert err < 1e-4, err
+        view = dict(seed=3, jitter=(0.2, -0.1))
+        colour = RayCaster(volume, shaded_tf(), device="cuda", **opts).render_color(camera, 8, 6, **view)
+        cpu_colour = RayCaster(volume, shaded_tf(), **opts).render(camera, 8, 6, **view).color
+        print(mode, jitter, "colour only: max abs difference", np.abs(colour - cpu_colour).max())
+        assert colour.shape == (6, 8, 3) and np.abs(colour - cpu_colour).max() < 1e-4
 """)
 
 

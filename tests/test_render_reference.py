@@ -52,6 +52,26 @@ def test_every_buffer_matches_the_float64_reference(parallel):
         assert err.mean() <= 1e-3, f"{name}: mean abs error {err.mean():.2e}"
 
 
+@pytest.mark.parametrize("start_jitter", [False, "ign"])
+def test_the_colour_only_program_renders_the_same_colour(start_jitter):
+    """render_color (native rendering's program: no feature tracking) against render's colour, bit for bit, and the
+    float64 reference; shaded with gradient opacity, jittered rays, a reused buffer."""
+    volume, tf = oblique_volume(), shaded_tf()
+    camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1)).zoom(2.0)
+    caster = RayCaster(volume, tf, sample_distance=0.4, block_size=4, start_jitter=start_jitter,
+                       background=(0.1, 0.2, 0.3))
+    buffer = np.full((11, 14, 3), np.nan, np.float32)
+    for seed, jitter in ((0, (0.0, 0.0)), (5, (0.23, -0.31))):
+        colour = caster.render_color(camera, 14, 11, jitter=jitter, seed=seed, out=buffer)
+        assert colour is buffer and colour.shape == (11, 14, 3) and colour.dtype == np.float32
+        assert np.array_equal(colour, caster.render(camera, 14, 11, jitter=jitter, seed=seed).color)
+    if not start_jitter:
+        ref = render_reference(volume, tf, camera, 14, 11, 0.4, jitter=(0.23, -0.31), background=(0.1, 0.2, 0.3))
+        assert np.abs(colour - ref["color"]).mean() <= 1e-3
+    with pytest.raises(ValueError, match="image size must be positive"):
+        caster.render_color(camera, 0, 11)
+
+
 @pytest.mark.parametrize("motion_depth", ["max_alpha", "threshold", "mean"])
 def test_motion_vectors_reproject_the_chosen_point(motion_depth):
     """P_DEPTH_MODE: the motion vectors (and motion_depth) follow the chosen point; the max-alpha

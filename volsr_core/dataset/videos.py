@@ -182,7 +182,7 @@ def render_frames(config: DatasetConfig, source: DatasetVolume, cameras: list[Ca
         frame = {"hr/color": hr, "cameras": camera_row(camera)}
         for s in config.scales:
             jitter = halton_jitter(t, jitter_phases(s))
-            centred = source.caster.render(camera, width // s, height // s, seed=t).color.copy()
+            centred = source.caster.render_color(camera, width // s, height // s, seed=t)
             lr = source.caster.render(camera, width // s, height // s, jitter=jitter,
                                      previous_camera=cameras[t - 1] if t else None, seed=t, out=buffers[s])
             buffers[s] = lr.data

@@ -1,4 +1,4 @@
-"""The ray-cast kernel for the CPU: the shared ray program, one thread team over image rows."""
+"""The ray-cast kernels for the CPU: the shared ray programs, one thread team over image rows."""
 from __future__ import annotations
 
 import numba
@@ -6,24 +6,40 @@ import numpy as np
 
 from volsr_core.render.stages import build_ray_program
 
-march_ray = build_ray_program(numba.njit(inline="always", fastmath=True, boundscheck=False, cache=True))
+_STAGE = numba.njit(inline="always", fastmath=True, boundscheck=False, cache=True)
+march_ray = build_ray_program(_STAGE)
+march_color = build_ray_program(_STAGE, features=False)
+
+
+@numba.njit(inline="always", cache=True)
+def _balanced_row(r, height):
+    """Image row of the r-th row rendered: the top and bottom halves interleaved, so that each thread's share of
+    rows (prange splits the range in contiguous chunks) samples the whole image: balanced work."""
+    half = (height + 1) // 2
+    return r // 2 if r % 2 == 0 else half + r // 2
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
-    height, width = out.shape[0], out.shape[1]
-    half = (height + 1) // 2
-    for r in numba.prange(height):
-        # interleave the top and bottom halves so that each thread's share of rows (prange
-        # splits the range in contiguous chunks) samples the whole image: balanced work
-        y = r // 2 if r % 2 == 0 else half + r // 2
-        for x in range(width):
+    for r in numba.prange(out.shape[0]):
+        y = _balanced_row(r, out.shape[0])
+        for x in range(out.shape[1]):
             march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+
+
+@numba.njit(parallel=True, fastmath=True, cache=True)
+def _render_color_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
+    for r in numba.prange(out.shape[0]):
+        y = _balanced_row(r, out.shape[0])
+        for x in range(out.shape[1]):
+            march_color(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
 
 
 def render_cpu(vol: np.ndarray, empty: np.ndarray, lut: np.ndarray, glut: np.ndarray, cam: np.ndarray,
                w2i: np.ndarray, grad_w: np.ndarray, params: np.ndarray, prev_vp: np.ndarray,
                out: np.ndarray, slabs: np.ndarray) -> None:
     """Fill ``out`` (H, W, OUT_CHANNELS) with every pixel's ray, on all CPU threads, and ``slabs`` (K, H, W,
-    SLAB_CHANNELS) with its depth slabs when ``params[P_SLABS]`` is K > 0."""
-    _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+    SLAB_CHANNELS) with its depth slabs when ``params[P_SLABS]`` is K > 0; an ``out`` of 3 channels gets the
+    colour alone (the colour-only program)."""
+    kernel = _render_color_rows if out.shape[2] == 3 else _render_rows
+    kernel(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)

@@ -17,6 +17,7 @@ from volsr_core.render.layout import P_SLABS  # noqa: E402
 from volsr_core.render.stages import build_ray_program  # noqa: E402
 
 march_ray = build_ray_program(cuda.jit(device=True, inline=True))
+march_color = build_ray_program(cuda.jit(device=True, inline=True), features=False)
 
 THREADS = (16, 8)
 
@@ -26,6 +27,13 @@ def _render_pixels(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out
     x, y = cuda.grid(2)
     if y < out.shape[0] and x < out.shape[1]:
         march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+
+
+@cuda.jit
+def _render_color_pixels(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
+    x, y = cuda.grid(2)
+    if y < out.shape[0] and x < out.shape[1]:
+        march_color(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
 
 
 class CudaVolume:
@@ -45,14 +53,16 @@ class CudaVolume:
 def render_cuda(volume: CudaVolume, lut: np.ndarray, glut: np.ndarray, cam: np.ndarray, w2i: np.ndarray,
                 grad_w: np.ndarray, params: np.ndarray, prev_vp: np.ndarray, out: np.ndarray,
                 slabs: np.ndarray) -> None:
-    """Fill host arrays ``out`` (H, W, OUT_CHANNELS) and, when ``params[P_SLABS]`` > 0, ``slabs`` on the GPU."""
+    """Fill host arrays ``out`` (H, W, OUT_CHANNELS) and, when ``params[P_SLABS]`` > 0, ``slabs`` on the GPU; an
+    ``out`` of 3 channels gets the colour alone (the colour-only program), and only that travels back."""
     height, width = out.shape[:2]
     d_out = cuda.device_array(out.shape, dtype=out.dtype)
     d_slabs = cuda.device_array(slabs.shape, dtype=slabs.dtype)
     blocks = ((width + THREADS[0] - 1) // THREADS[0], (height + THREADS[1] - 1) // THREADS[1])
-    _render_pixels[blocks, THREADS](volume.vol, volume.empty, cuda.to_device(lut), cuda.to_device(glut),
-                                    cuda.to_device(cam), cuda.to_device(w2i), cuda.to_device(grad_w),
-                                    cuda.to_device(params), cuda.to_device(prev_vp), d_out, d_slabs)
+    kernel = _render_color_pixels if out.shape[2] == 3 else _render_pixels
+    kernel[blocks, THREADS](volume.vol, volume.empty, cuda.to_device(lut), cuda.to_device(glut), cuda.to_device(cam),
+                            cuda.to_device(w2i), cuda.to_device(grad_w), cuda.to_device(params),
+                            cuda.to_device(prev_vp), d_out, d_slabs)
     d_out.copy_to_host(out)
     if params[P_SLABS] > 0:
         d_slabs.copy_to_host(slabs)

@@ -145,7 +145,8 @@ class BudgetRenderer:
     estimates. ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``state`` says what the frame
     was. Like a :class:`Pipeline` it has ``size``, ``scale`` and
     ``low_resolution_size`` (the level drawn last; 1 and ``size`` while still), ``caster``,
-    ``last_timings`` and ``last_low_resolution``, so the batch and the comparison methods take it.
+    ``last_timings`` and ``last_low_resolution`` (None after a native or reduced-size level, which render the
+    colour alone), so the batch and the comparison methods take it.
     """
 
     def __init__(self, volume: Volume, transfer_function: TransferFunction, budget_ms: float, *,
@@ -233,7 +234,7 @@ class BudgetRenderer:
     # rendering -------------------------------------------------------------------------------------
     def _render_level(self, level: Level, camera: Camera) -> np.ndarray:
         if level.scale == 1:
-            return self.caster.render(camera, *self.size).color.copy()
+            return self.caster.render_color(camera, *self.size)
         return self.pipelines[level].render(camera)
 
     def _is_still(self, camera: Camera) -> bool:
@@ -244,8 +245,8 @@ class BudgetRenderer:
         """One more jittered full-size sample per pixel into the running mean: after N still frames the
         native N-spp image (the Halton offsets and ray-start seeds of ``render_supersampled(..., seed=STILL_SEED)``)."""
         k = self._still_count
-        frame = self.caster.render(camera, *self.size, jitter=halton_jitter(k, 1 << 16), seed=STILL_SEED + k)
-        colour = frame.color.astype(np.float64)
+        colour = self.caster.render_color(camera, *self.size, jitter=halton_jitter(k, 1 << 16),
+                                          seed=STILL_SEED + k).astype(np.float64)
         self._still_sum = colour if self._still_sum is None else self._still_sum + colour
         self._still_count = k + 1
         return (self._still_sum / self._still_count).astype(np.float32)

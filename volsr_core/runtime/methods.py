@@ -46,7 +46,7 @@ class MethodFrame:
     image: np.ndarray
     ms_render: float
     ms_upscale: float = 0.0
-    low_resolution: FeatureFrame | None = None  # the LR frame rendered, for methods that render one
+    low_resolution: FeatureFrame | None = None  # the LR frame rendered, for methods that render one with features
 
     @property
     def ms_total(self) -> float:
@@ -138,11 +138,11 @@ class ReducedSize(Method):
 
     def __call__(self, camera: Camera) -> MethodFrame:
         started = time.perf_counter()
-        lr = self.caster.render(camera, *self.low_resolution_size, seed=self.frame)
+        lr = self.caster.render_color(camera, *self.low_resolution_size, seed=self.frame)  # the colour alone, as VTK
         rendered = time.perf_counter()
-        image = self.upscale(lr.color)
+        image = self.upscale(lr)
         self.frame += 1
-        return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered), lr)
+        return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered))
 
 
 class Taau(Method):

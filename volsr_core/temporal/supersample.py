@@ -12,18 +12,18 @@ def render_supersampled(raycaster: RayCaster, camera: Camera, width: int, height
                         spp: int = 16, seed: int = 0) -> np.ndarray:
     """(H, W, 3) float32 colour averaged over ``spp`` Halton(2, 3) jitter offsets (a box filter).
 
-    ``spp=1`` renders the pixel centres without jitter. Sample i is rendered with ray-start seed
+    ``spp=1`` renders the pixel centres without jitter; each render is the colour-only ray program
+    (:meth:`RayCaster.render_color`). Sample i is rendered with ray-start seed
     ``seed + i`` (used when the caster's start jitter is on: each sample then starts its rays at other
     offsets, so the average also removes the rings a fixed ray start leaves).
     """
     if spp < 1:
         raise ValueError("spp must be at least 1")
     if spp == 1:
-        return raycaster.render(camera, width, height, seed=seed).color.copy()
+        return raycaster.render_color(camera, width, height, seed=seed)
     acc = None
     buffer = None
     for i in range(spp):
-        frame = raycaster.render(camera, width, height, jitter=halton_jitter(i, spp), seed=seed + i, out=buffer)
-        buffer = frame.data
-        acc = frame.color.astype(np.float64) if acc is None else acc + frame.color
+        buffer = raycaster.render_color(camera, width, height, jitter=halton_jitter(i, spp), seed=seed + i, out=buffer)
+        acc = buffer.astype(np.float64) if acc is None else acc + buffer
     return (acc / spp).astype(np.float32)

@@ -1,0 +1,217 @@
+"""What each method's frame would cost on a GPU if it stayed there: its parts timed on the device, and the
+``volsr bench`` PSNRs of the CPU runs placed at those times (a projection, not a run).
+
+    python benchmarks/device/gpu_probe.py OUT [--bench docs/bench] [--sizes 512,1024] [--names CT_AVM,LIDC2,...]
+                                          [--volumes DIR] [--repeats 15] [--torch-device cuda]
+
+On the lent H200 (docs/performance-gpu.md) every frame's 14-15 float32 feature channels travelled to host memory,
+and that copy, not the ray march, set every method's time. A viewer displays from the device, so the question
+the next step (render, TAAU and filter kept on the device) has to answer first is where the methods would lie
+without the copy. Per bench volume and output size this measures, with the device synchronised around each call
+(medians of ``--repeats`` after a warm-up):
+
+- the CUDA ray cast alone (``_render_pixels``, all buffers already on the device), at every size the bench
+  renders: full size (native; N spp = N casts), round(size / F) (native 1/F size), size / S with motion
+  vectors and, where the bench's VolSR row had them, depth slabs;
+- the bilinear upscale on the device (``torch.nn.functional.interpolate``, as a GPU viewer would stretch);
+- each shipped model's network on ``--torch-device`` at its LR size, inputs already there (XS: its 5x5 filter
+  as the network's conv);
+
+and prices each row of the CPU run's ``bench.json`` (``--bench``/<size>-2deg; PSNRs do not depend on the device:
+equal to 0.01 dB on the H200) by them. TAAU and the layered TAAU have no CUDA kernel yet and count **0 ms**: the
+projection is an upper bound on how far TAAU and VolSR could lie above the curve, which is what decides whether
+keeping the frame on the device can pay. Writes ``OUT/probe.json`` and ``OUT/probe.md`` (the parts, then per
+volume each row's projected ms, PSNR and, for VolSR, its margin over the projected native + bilinear curve,
+``check_targets``' target 2).
+
+Volumes come as ``gpu_bench.py pack`` records (``--volumes``, default ``benchmarks/device/volumes``); here,
+``NUMBA_ENABLE_CUDASIM=1 ... --sizes 16 --torch-device cpu`` runs it through numba's CUDA simulator on the
+phantom's rows of a small CPU bench (``--names phantom``) to check the script, not to time anything.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from gpu_bench import SCENES, read_packed  # noqa: E402
+
+from volsr_core.apps.bench.report import check_targets  # noqa: E402
+from volsr_core.apps.bench.scenes import load_bench_volume  # noqa: E402
+from volsr_core.render.raycaster import RayCaster  # noqa: E402
+from volsr_core.scene import Volume  # noqa: E402
+from volsr_core.scene.camera_paths import orbit_around  # noqa: E402
+
+MODELS = (("XS", 2), ("S", 2), ("XS", 4), ("S", 4), ("M", 4), ("S", 8))
+
+
+def median_ms(call: Callable[[], None], sync: Callable[[], None], repeats: int) -> float:
+    """Median ms of ``call`` (``sync`` waits for the device), after two warm-up calls."""
+    for _ in range(2):
+        call()
+    sync()
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        call()
+        sync()
+        times.append(1000.0 * (time.perf_counter() - started))
+    return statistics.median(times)
+
+
+class MarchTimer:
+    """The CUDA ray cast of one caster alone: every input and output allocated on the device once per size."""
+
+    def __init__(self, caster: RayCaster, cameras: list, repeats: int):
+        from numba import cuda
+
+        from volsr_core.render.cuda import THREADS, _render_pixels
+
+        self.cuda, self.kernel, self.threads = cuda, _render_pixels, THREADS
+        self.caster, self.cameras, self.repeats = caster, cameras, repeats
+        caster._cuda_volume.set_empty(caster._empty)
+        t = caster.tables
+        self.static = [cuda.to_device(a) for a in (t.rgba, t.gradient_opacity)]
+        self.geometry = [cuda.to_device(a) for a in (caster._w2i, caster._grad_w)]
+
+    def ms(self, width: int, height: int, moving: bool, slabs: int = 0) -> float:
+        """Median ms of casting ``width`` x ``height`` rays (``moving``: with the previous camera's motion vectors)."""
+        from volsr_core.render.layout import OUT_CHANNELS, SLAB_CHANNELS
+
+        cuda, caster = self.cuda, self.caster
+        camera, previous = self.cameras[1], self.cameras[0]
+        cam = cuda.to_device(caster._camera_array(camera, width, height, (0.0, 0.0)))
+        prev_vp = cuda.to_device(np.ascontiguousarray(previous.view_projection(width / height)
+                                                      if moving else np.eye(4)))
+        params = cuda.to_device(caster._params(1, moving, slabs))
+        out = cuda.device_array((height, width, OUT_CHANNELS), np.float32)
+        slab_out = cuda.device_array((slabs, height, width, SLAB_CHANNELS) if slabs else (1, 1, 1, SLAB_CHANNELS),
+                                     np.float32)
+        blocks = ((width + self.threads[0] - 1) // self.threads[0], (height + self.threads[1] - 1) // self.threads[1])
+        volume = caster._cuda_volume
+
+        def cast() -> None:
+            self.kernel[blocks, self.threads](volume.vol, volume.empty, *self.static, cam, *self.geometry, params,
+                                              prev_vp, out, slab_out)
+
+        return median_ms(cast, cuda.synchronize, self.repeats)
+
+
+def network_ms(torch, variant: str, scale: int, height: int, width: int, device: str, repeats: int) -> float:
+    """Median ms of the shipped ``variant`` ``scale``x network (its .pt) on ``device``, inputs already there."""
+    from volsr_core.runtime.export import example_inputs
+    from volsr_core.runtime.models import model_file
+    from volsr_core.sr.checkpoint import load_model
+
+    model = load_model(model_file(variant, scale, "pt")).to(device).eval()
+    inputs = [x.to(device) for x in example_inputs(model.config, height, width)]
+    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
+    with torch.no_grad():
+        return median_ms(lambda: model(*inputs), sync, repeats)
+
+
+def bilinear_ms(torch, height: int, width: int, out_height: int, out_width: int, device: str, repeats: int) -> float:
+    image = torch.rand(1, 3, height, width, device=device)
+    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
+    return median_ms(lambda: torch.nn.functional.interpolate(image, size=(out_height, out_width), mode="bilinear",
+                                                             align_corners=False), sync, repeats)
+
+
+def probe_volume(spec: str, size: int, cpu_rows: list[dict], torch_device: str, repeats: int) -> dict:
+    """The parts and the priced rows of one volume at ``size``²."""
+    import torch
+
+    scene = load_bench_volume(spec)
+    caster = RayCaster(scene.volume, scene.transfer_function, device="cuda", start_jitter="ign")
+    cameras = orbit_around(caster.visible_bounds(), 2, 2.0)
+    march = MarchTimer(caster, cameras, repeats)
+    parts: dict[str, float] = {}
+
+    def part(name: str, measure: Callable[[], float]) -> float:
+        if name not in parts:
+            parts[name] = measure()
+        return parts[name]
+
+    priced = []
+    for row in cpu_rows:
+        s = row["scale"]
+        if row["method"] == "native":
+            render, after = row["spp"] * part(f"cast {size}²", lambda: march.ms(size, size, False)), 0.0
+        elif row["method"] == "bilinear":
+            lr = max(1, round(size / s))
+            render = part(f"cast {lr}²", lambda: march.ms(lr, lr, False))
+            after = part(f"bilinear {lr}² -> {size}²", lambda: bilinear_ms(torch, lr, lr, size, size, torch_device,
+                                                                          repeats))
+        elif row["method"] in ("taau", "volsr"):
+            lr, slabs = size // s, row.get("slabs") or 0
+            render = part(f"cast {lr}² moving" + (f" in {slabs} slabs" if slabs else ""),
+                          lambda: march.ms(lr, lr, True, slabs))
+            after = 0.0
+            if row["method"] == "volsr":
+                after = part(f"network {row['variant']} {s}x at {lr}²",
+                             lambda: network_ms(torch, row["variant"], s, lr, lr, torch_device, repeats))
+        else:
+            continue
+        priced.append({**row, "ms_render": round(render, 4), "ms_network": round(after, 4),
+                       "ms_total": round(render + after, 4)})
+    return {"scene": priced[0]["scene"] if priced else spec, "parts": {k: round(v, 4) for k, v in parts.items()},
+            "rows": priced, "targets": check_targets(priced)}
+
+
+def markdown(results: list[dict], header: str) -> str:
+    lines = [header, ""]
+    for result in results:
+        lines += [f"## {result['scene']}, {result['size']}²", "", "| part | ms |", "|---|---:|"]
+        lines += [f"| {name} | {ms:.3f} |" for name, ms in result["parts"].items()]
+        margins = {p["label"]: p for t in result["targets"].values() for p in t["above_bilinear"]["points"]}
+        lines += ["", "| method | cast ms | after ms | total ms | PSNR dB (CPU run) | dB above the curve |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        for row in result["rows"]:
+            margin = margins.get(row["label"])
+            lines.append(f"| {row['label']} | {row['ms_render']:.3f} | {row['ms_network']:.3f} | "
+                         f"{row['ms_total']:.3f} | {row['psnr']:.2f} | "
+                         f"{'' if margin is None else format(margin['margin_db'], '+.2f')} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--bench", type=Path, default=Path("docs/bench"), help="folder of the CPU runs' <size>-2deg/")
+    parser.add_argument("--sizes", default="512,1024")
+    parser.add_argument("--names", default=",".join(SCENES))
+    parser.add_argument("--volumes", type=Path, default=Path(__file__).parent / "volumes")
+    parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--torch-device", default="cuda")
+    args = parser.parse_args(argv)
+    if args.volumes.is_dir():
+        Volume.load = read_packed(args.volumes)
+    args.out.mkdir(parents=True, exist_ok=True)
+    results = []
+    for size in (int(s) for s in args.sizes.split(",")):
+        rows = json.loads((args.bench / f"{size}-2deg" / "bench.json").read_text())["rows"]
+        for name in args.names.split(","):
+            spec = SCENES.get(name, name)
+            mine = [r for r in rows if r["volume"] == spec.split(":")[0] or name == "phantom"]
+            started = time.time()
+            result = probe_volume(spec if name != "phantom" else None, size, mine, args.torch_device, args.repeats)
+            results.append({"size": size, **result})
+            (args.out / "probe.json").write_text(json.dumps(results, indent=1))  # after each volume: a cut keeps it
+            print(f"== {size}² {name}: {time.time() - started:.0f} s", flush=True)
+    header = (f"# Frames kept on the device: a projection\n\nParts timed by `benchmarks/device/gpu_probe.py` "
+              f"(torch on {args.torch_device}, medians of {args.repeats}); PSNRs from the CPU runs in {args.bench}; "
+              "TAAU and the layered TAAU count 0 ms (no CUDA kernel yet): an upper bound on TAAU's and VolSR's "
+              "margins.")
+    (args.out / "probe.md").write_text(markdown(results, header))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
