@@ -137,7 +137,7 @@ def test_motion_statistics_are_numpys_median_and_offscreen_fraction(shape, step,
     squared = np.square(sample[..., 0]) + np.square(sample[..., 1])
     x = np.arange(0, w, step)[None, :] + 0.5 + sample[..., 0]
     y = np.arange(0, h, step)[:, None] + 0.5 + sample[..., 1]
-    median, offscreen = _motion_statistics(motion, step)
+    median, offscreen = _motion_statistics(sample, step, h, w)
     assert median == pytest.approx(float(np.median(squared)), rel=1e-6)
     assert offscreen == pytest.approx(float(np.mean((x < 0) | (x > w) | (y < 0) | (y > h))), abs=1e-12)
 

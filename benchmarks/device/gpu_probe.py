@@ -14,15 +14,18 @@ without the copy. Per bench volume and output size this measures, with the devic
   renders: full size (native; N spp = N casts), round(size / F) (native 1/F size), size / S with motion
   vectors and, where the bench's VolSR row had them, depth slabs;
 - the bilinear upscale on the device (``torch.nn.functional.interpolate``, as a GPU viewer would stretch);
-- each shipped model's network on ``--torch-device`` at its LR size, inputs already there (XS: its 5x5 filter
-  as the network's conv);
+- TAAU and the layered TAAU as CUDA kernels (:mod:`volsr_core.temporal.cuda`) on a frame rendered and left on the
+  device, for VolSR XS with its filter (:mod:`volsr_core.runtime.base_filter_cuda`) after it and, for these and
+  TAAU alone, the image copied back: what ``Pipeline(device="cuda")`` does for XS, whose rows the bench on the GPU
+  now measures end to end too;
+- each shipped U-Net's network on ``--torch-device`` at its LR size, inputs already there, after its TAAU on the
+  device (without the side outputs the S and M models also read: a lower bound on their step);
 
 and prices each row of the CPU run's ``bench.json`` (``--bench``/<size>-2deg; PSNRs do not depend on the device:
-equal to 0.01 dB on the H200) by them. TAAU and the layered TAAU have no CUDA kernel yet and count **0 ms**: the
-projection is an upper bound on how far TAAU and VolSR could lie above the curve, which is what decides whether
-keeping the frame on the device can pay. Writes ``OUT/probe.json`` and ``OUT/probe.md`` (the parts, then per
-volume each row's projected ms, PSNR and, for VolSR, its margin over the projected native + bilinear curve,
-``check_targets``' target 2).
+equal to 0.01 dB on the H200) by them: where each method would lie against the native + bilinear curve were its
+frame kept on the device, which is what decides whether that can pay. Writes ``OUT/probe.json`` and
+``OUT/probe.md`` (the parts, then per volume each row's projected ms, PSNR and, for VolSR, its margin over the
+projected native + bilinear curve, ``check_targets``' target 2).
 
 Volumes come as ``gpu_bench.py pack`` records (``--volumes``, default ``benchmarks/device/volumes``); here,
 ``NUMBA_ENABLE_CUDASIM=1 ... --sizes 16 --torch-device cpu`` runs it through numba's CUDA simulator on the
@@ -117,6 +120,45 @@ def network_ms(torch, variant: str, scale: int, height: int, width: int, device:
         return median_ms(lambda: model(*inputs), sync, repeats)
 
 
+def post_ms(caster: RayCaster, cameras: list, lr: int, scale: int, slabs: int, variant: str | None, copy: bool,
+            repeats: int) -> float:
+    """Median ms of what follows the ray cast of a moving ``lr``² frame on the device: the TAAU (with ``slabs``, the
+    layered TAAU: :mod:`volsr_core.temporal.cuda`), for ``variant`` "XS" its filter after it
+    (:mod:`volsr_core.runtime.base_filter_cuda`), and with ``copy`` the image copied to the host (what
+    ``Pipeline(device="cuda")`` does for XS, and the bench's TAAU on the device); the frame rendered there once."""
+    from numba import cuda
+
+    from volsr_core.runtime.base_filter_cuda import CudaBaseFilter
+    from volsr_core.runtime.engines import open_engine
+    from volsr_core.runtime.models import model_file
+    from volsr_core.temporal.cuda import CudaLayeredUpsampler, CudaTemporalUpsampler
+    from volsr_core.temporal.jitter import halton_jitter, jitter_phases
+    from volsr_core.temporal.taau import view_rotation
+
+    frames = [caster.render(camera, lr, lr, jitter=halton_jitter(t, jitter_phases(scale)), seed=t, slabs=slabs,
+                            previous_camera=cameras[t - 1] if t else None, on_device=True)
+              for t, camera in enumerate(cameras[:2])]
+    upsampler = CudaLayeredUpsampler(scale) if slabs else CudaTemporalUpsampler(scale)
+    rotation = view_rotation(cameras[1], cameras[0])
+    device_filter = CudaBaseFilter(*open_engine(model_file("XS", scale, "onnx")).base_filter) if variant == "XS" \
+        else None
+
+    def accumulate(frame):
+        if slabs:
+            return upsampler(frame.slabs, frame.jitter, caster.background, rotation, frame.pixels_per_voxel)
+        return upsampler(frame.color, frame.motion, frame.jitter, frame.motion_depth, rotation, frame.pixels_per_voxel)
+
+    def step() -> None:
+        image = accumulate(frames[1])
+        if device_filter is not None:
+            image = device_filter.filter(image, clip_output=True)
+        if copy:
+            image.copy_to_host()
+
+    accumulate(frames[0])
+    return median_ms(step, cuda.synchronize, repeats)
+
+
 def bilinear_ms(torch, height: int, width: int, out_height: int, out_width: int, device: str, repeats: int) -> float:
     image = torch.rand(1, 3, height, width, device=device)
     sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
@@ -151,12 +193,16 @@ def probe_volume(spec: str, size: int, cpu_rows: list[dict], torch_device: str, 
                                                                           repeats))
         elif row["method"] in ("taau", "volsr"):
             lr, slabs = size // s, row.get("slabs") or 0
-            render = part(f"cast {lr}² moving" + (f" in {slabs} slabs" if slabs else ""),
-                          lambda: march.ms(lr, lr, True, slabs))
-            after = 0.0
-            if row["method"] == "volsr":
-                after = part(f"network {row['variant']} {s}x at {lr}²",
-                             lambda: network_ms(torch, row["variant"], s, lr, lr, torch_device, repeats))
+            layers = f" in {slabs} slabs" if slabs else ""
+            render = part(f"cast {lr}² moving{layers}", lambda: march.ms(lr, lr, True, slabs))
+            xs = row["method"] == "volsr" and row["variant"] == "XS"
+            if row["method"] == "taau" or xs:  # the whole step on the device, the image copied back
+                name = f"TAAU {s}x{layers}" + (" + XS filter" if xs else "") + f" at {lr}², image copied back"
+                after = part(name, lambda: post_ms(caster, cameras, lr, s, slabs, row.get("variant"), True, repeats))
+            else:  # a U-Net: the TAAU it refines on the device, then the network on its inputs there
+                after = part(f"TAAU {s}x at {lr}²", lambda: post_ms(caster, cameras, lr, s, 0, None, False, repeats))
+                after += part(f"network {row['variant']} {s}x at {lr}²",
+                              lambda: network_ms(torch, row["variant"], s, lr, lr, torch_device, repeats))
         else:
             continue
         priced.append({**row, "ms_render": round(render, 4), "ms_network": round(after, 4),
@@ -208,8 +254,8 @@ def main(argv: list[str]) -> None:
             print(f"== {size}² {name}: {time.time() - started:.0f} s", flush=True)
     header = (f"# Frames kept on the device: a projection\n\nParts timed by `benchmarks/device/gpu_probe.py` "
               f"(torch on {args.torch_device}, medians of {args.repeats}); PSNRs from the CPU runs in {args.bench}; "
-              "TAAU and the layered TAAU count 0 ms (no CUDA kernel yet): an upper bound on TAAU's and VolSR's "
-              "margins.")
+              "TAAU, the layered TAAU and XS's filter as CUDA kernels on frames left on the device; a U-Net's "
+              "network timed apart, its inputs there (its TAAU's side outputs not computed).")
     (args.out / "probe.md").write_text(markdown(results, header))
 
 

@@ -39,6 +39,9 @@ class FeatureFrame:
       (``RayCaster.render(..., slabs=K)``): per slab the premultiplied RGB and alpha of its samples alone
       (``SLAB_RGBA``) and the motion vector of its opacity-weighted mean point (``SLAB_MOTION``, 0 where the
       slab is empty); composited front to back they give ``color`` (over the background) and ``alpha``.
+
+    The arrays are host (numpy) arrays, or GPU device arrays where the frame was rendered ``on_device``
+    (:attr:`on_device`; :meth:`to_host` copies them back).
     """
 
     data: np.ndarray
@@ -55,6 +58,19 @@ class FeatureFrame:
                                        + (SLAB_CHANNELS,)):
             raise ValueError(f"slabs must be (K, {self.height}, {self.width}, {SLAB_CHANNELS}), got "
                              f"{self.slabs.shape}")
+
+    @property
+    def on_device(self) -> bool:
+        """Whether the buffers are GPU device arrays (``RayCaster.render(..., on_device=True)``)."""
+        return hasattr(self.data, "copy_to_host")
+
+    def to_host(self) -> "FeatureFrame":
+        """This frame with its buffers in host memory (itself when they are there already)."""
+        if not self.on_device:
+            return self
+        slabs = None if self.slabs is None else self.slabs.copy_to_host()
+        return FeatureFrame(self.data.copy_to_host(), self.camera, self.jitter, self.previous_camera,
+                            self.pixels_per_voxel, slabs)
 
     @property
     def height(self) -> int:

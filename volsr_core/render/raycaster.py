@@ -186,19 +186,26 @@ class RayCaster:
 
     def render(self, camera: Camera, width: int, height: int | None = None, *,
                jitter: Sequence[float] = (0.0, 0.0), previous_camera: Camera | None = None,
-               seed: int = 0, out: np.ndarray | None = None, slabs: int = 0) -> FeatureFrame:
+               seed: int = 0, out: np.ndarray | None = None, slabs: int = 0, on_device: bool = False) -> FeatureFrame:
         """Render ``width`` x ``height`` pixels (height defaults to width) seen by ``camera``.
 
         ``jitter`` shifts every ray by (jx, jy) pixels (+y down), e.g. a Halton offset in
         [-0.5, 0.5); ``previous_camera`` enables motion vectors; ``seed`` drives the per-ray
         start jitter when it is on; ``out`` may pass a float32 (H, W, OUT_CHANNELS) array to reuse; ``slabs``
-        K > 0 also composites K depth slabs apart (:attr:`FeatureFrame.slabs`).
+        K > 0 also composites K depth slabs apart (:attr:`FeatureFrame.slabs`). ``on_device`` (device "cuda"
+        only) leaves the buffers on the GPU: the frame's arrays are device arrays, for kernels that run there
+        (:meth:`FeatureFrame.to_host` copies them back).
         """
         height = _checked_height(width, height)
         if slabs < 0 or int(slabs) != slabs:
             raise ValueError(f"slabs must be a whole number >= 0, got {slabs}")
+        if on_device and self.device != "cuda":
+            raise ValueError(f"on_device needs the cuda device, this ray caster renders on {self.device}")
         jitter = (float(jitter[0]), float(jitter[1]))
-        if out is None or out.shape != (height, width, L.OUT_CHANNELS) or out.dtype != np.float32:
+        if on_device:
+            from numba import cuda
+            out = cuda.device_array((height, width, L.OUT_CHANNELS), dtype=np.float32)
+        elif out is None or out.shape != (height, width, L.OUT_CHANNELS) or out.dtype != np.float32:
             out = np.empty((height, width, L.OUT_CHANNELS), dtype=np.float32)
         slab_out = self._cast(camera, width, height, jitter, previous_camera, seed, out, int(slabs))
         voxel = float(min(self.volume.spacing))
@@ -208,12 +215,16 @@ class RayCaster:
     def _cast(self, camera: Camera, width: int, height: int, jitter: tuple[float, float],
               previous_camera: Camera | None, seed: int, out: np.ndarray, slabs: int) -> np.ndarray:
         """Run the kernel of ``out``'s layout (OUT_CHANNELS: every feature; 3: the colour alone) on this caster's
-        device; returns the slabs array (a 1x1x1 dummy when ``slabs`` is 0)."""
+        device; returns the slabs array (a 1x1x1 dummy when ``slabs`` is 0; a device array where ``out`` is one)."""
         cam = self._camera_array(camera, width, height, jitter)
         prev_vp = np.eye(4) if previous_camera is None else previous_camera.view_projection(width / height)
         params = self._params(seed, previous_camera is not None, slabs)
-        slab_out = np.empty((slabs, height, width, L.SLAB_CHANNELS) if slabs else (1, 1, 1, L.SLAB_CHANNELS),
-                            dtype=np.float32)
+        slab_shape = (slabs, height, width, L.SLAB_CHANNELS) if slabs else (1, 1, 1, L.SLAB_CHANNELS)
+        if hasattr(out, "copy_to_host"):  # a device array: the slabs stay on the device too
+            from numba import cuda
+            slab_out = cuda.device_array(slab_shape, dtype=np.float32)
+        else:
+            slab_out = np.empty(slab_shape, dtype=np.float32)
         t = self.tables
         if self.device == "cuda":
             from volsr_core.render.cuda import render_cuda

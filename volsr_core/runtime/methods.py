@@ -148,14 +148,23 @@ class ReducedSize(Method):
 class Taau(Method):
     """size / ``scale``, Halton-jittered (``halton_jitter(frame, jitter_phases(scale))``), with motion
     vectors to the previous camera, accumulated by :func:`~volsr_core.sr.history.taau_upsampler`; with
-    ``slabs`` K > 0 rendered in K depth slabs and accumulated by the layered TAAU (one history per slab)."""
+    ``slabs`` K > 0 rendered in K depth slabs and accumulated by the layered TAAU (one history per slab). With a
+    ray caster on "cuda" the frame stays on the GPU and the TAAU runs there (:mod:`volsr_core.temporal.cuda`), as
+    VolSR XS's does; the image is copied back."""
 
     kind = "taau"
 
     def __init__(self, caster: RayCaster | None, size: tuple[int, int], scale: int, slabs: int = 0):
         super().__init__(size)
         self.caster, self.scale, self.slabs = caster, int(scale), int(slabs)
-        self.upsampler = LayeredUpsampler(self.scale) if self.slabs else taau_upsampler(self.scale, side_outputs=False)
+        self.on_device = getattr(caster, "device", "cpu") == "cuda"
+        if self.on_device:
+            from volsr_core.temporal.cuda import CudaLayeredUpsampler, CudaTemporalUpsampler
+
+            self.upsampler = CudaLayeredUpsampler(self.scale) if self.slabs else CudaTemporalUpsampler(self.scale)
+        else:
+            self.upsampler = LayeredUpsampler(self.scale) if self.slabs else taau_upsampler(self.scale,
+                                                                                          side_outputs=False)
         self.frame = 0
         self.previous: Camera | None = None
 
@@ -179,23 +188,27 @@ class Taau(Method):
         voxel) in, (H, W, 3) out. Not for a layered TAAU, which takes the frame's depth slabs."""
         if self.slabs:
             raise ValueError("a layered TAAU upscales depth slabs, not a colour image: call it on a camera")
-        return self.upsampler(colour, motion, jitter, depth, rotation, pixels_per_voxel)
+        image = self.upsampler(colour, motion, jitter, depth, rotation, pixels_per_voxel)
+        return image.copy_to_host() if self.on_device else image
 
     def __call__(self, camera: Camera) -> MethodFrame:
         width, height = self.size
         jitter = halton_jitter(self.frame, jitter_phases(self.scale))
         started = time.perf_counter()
         lr = self.caster.render(camera, width // self.scale, height // self.scale, jitter=jitter,
-                                previous_camera=self.previous, seed=self.frame, slabs=self.slabs)
+                                previous_camera=self.previous, seed=self.frame, slabs=self.slabs,
+                                on_device=self.on_device)
         rendered = time.perf_counter()
         rotation = view_rotation(camera, self.previous)
         if self.slabs:
             image = self.upsampler(lr.slabs, lr.jitter, self.caster.background, rotation, lr.pixels_per_voxel)
+            image = image.copy_to_host() if self.on_device else image
         else:
             image = self.upscale(lr.color, lr.motion, lr.jitter, lr.motion_depth, rotation, lr.pixels_per_voxel)
+        ms_network = _elapsed_ms(rendered)
         self.frame += 1
         self.previous = camera
-        return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered), lr)
+        return MethodFrame(image, 1000.0 * (rendered - started), ms_network, lr.to_host())
 
 
 class VolSR(Method):

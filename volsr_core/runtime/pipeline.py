@@ -34,7 +34,8 @@ class Pipeline:
       ``scale`` (XS at 2x: the model that pays off on a CPU, docs/performance.md);
     - ``size``: output (width, height) in pixels; any size: the LR frame is ceil(size / scale)
       and the output is cropped to ``size``;
-    - ``device``: "cpu" or "cuda", for the ray caster and the network;
+    - ``device``: "cpu" or "cuda", for the ray caster and the network; on "cuda" a base-filter model on TAAU
+      (variant XS) keeps the frame on the GPU (render, TAAU and filter there, one RGB image copied back);
     - ``backend``: "auto" (by file type), "onnxruntime" or "torch";
     - ``max_turn`` (degrees), ``max_zoom``: a camera that turned or zoomed further than this since
       the last frame is a cut (:func:`~volsr_core.runtime.upscaler.camera_jump`);
@@ -70,19 +71,27 @@ class Pipeline:
         self._caster_options = {"sample_distance": sample_distance, "device": device, "start_jitter": "ign"}
         self.caster = RayCaster(volume, transfer_function, background=tuple(float(c) for c in background),
                                 **self._caster_options)
-        self.upscaler = StatefulUpscaler(self.engine, max_turn=max_turn, max_zoom=max_zoom, slabs=slabs)
+        self.upscaler = StatefulUpscaler(self.engine, max_turn=max_turn, max_zoom=max_zoom, slabs=slabs, device=device)
         self.slabs = self.upscaler.slabs
         self.size = (int(size[0]), int(size[1]))
         self._tf_key = _tf_key(transfer_function)
         self.frame = 0
         self.previous_camera: Camera | None = None
         self.last_timings: dict[str, float] = {}
-        self.last_low_resolution = None
+        self._last_lr = None
 
     @property
     def low_resolution_size(self) -> tuple[int, int]:
         """(width, height) of the rendered LR frame."""
         return math.ceil(self.size[0] / self.scale), math.ceil(self.size[1] / self.scale)
+
+    @property
+    def last_low_resolution(self):
+        """The last LR :class:`~volsr_core.render.features.FeatureFrame` rendered, in host memory (a frame kept on
+        the GPU is copied back when asked for, not before); None before the first frame."""
+        if self._last_lr is not None and self._last_lr.on_device:
+            self._last_lr = self._last_lr.to_host()
+        return self._last_lr
 
     @property
     def resets(self) -> int:
@@ -132,13 +141,13 @@ class Pipeline:
         jitter = halton_jitter(self.frame, jitter_phases(self.scale))
         started = time.perf_counter()
         lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame,
-                                slabs=self.slabs)
+                                slabs=self.slabs, on_device=self.upscaler.on_device)
         rendered = time.perf_counter()
         image = self.upscaler.upscale(lr, self.caster.background)[: self.size[1], : self.size[0]]
         done = time.perf_counter()
         self.last_timings = {"render_ms": 1000 * (rendered - started), "network_ms": 1000 * (done - rendered),
                              "total_ms": 1000 * (done - started)}
-        self.last_low_resolution = lr
+        self._last_lr = lr
         self.previous_camera = camera
         self.frame += 1
         return image

@@ -30,17 +30,17 @@ def network_inputs(frame: FeatureFrame, features: tuple[str, ...]) -> np.ndarray
 
 
 @numba.njit(cache=True)
-def _motion_statistics(motion: np.ndarray, step: int) -> tuple[float, float]:
-    """Over every ``step``-th pixel each way of ``motion`` (h, w, 2; LR px, from the pixel centre): the median of
-    the vectors' squared lengths and the fraction that point off the frame (one numba loop: 27 µs on a 128² frame's
-    strided motion buffer, where numpy's passes over the sample took 109)."""
-    h, w = motion.shape[0], motion.shape[1]
-    rows, cols = (h + step - 1) // step, (w + step - 1) // step
+def _motion_statistics(sample: np.ndarray, step: int, h: int, w: int) -> tuple[float, float]:
+    """Over a motion buffer's every ``step``-th pixel each way, ``sample`` (rows, cols, 2) = ``motion[::step,
+    ::step]`` of an (h, w, 2) buffer (LR px, from the pixel centre): the median of the vectors' squared lengths and
+    the fraction that point off the frame (one numba loop: 27 µs on a 128² frame's strided motion buffer, where
+    numpy's passes over the sample took 109)."""
+    rows, cols = sample.shape[0], sample.shape[1]
     squared = np.empty(rows * cols, np.float32)
     off = 0
     for j in range(rows):
         for i in range(cols):
-            mx, my = motion[j * step, i * step, 0], motion[j * step, i * step, 1]
+            mx, my = sample[j, i, 0], sample[j, i, 1]
             squared[j * cols + i] = mx * mx + my * my
             x, y = i * step + 0.5 + mx, j * step + 0.5 + my
             if x < 0 or x > w or y < 0 or y > h:
@@ -116,10 +116,14 @@ class StatefulUpscaler:
     (:class:`~volsr_core.temporal.layered.LayeredUpsampler`) on frames rendered in K depth slabs
     (``RayCaster.render(..., slabs=K)``) instead of the TAAU on their colour, and the filter on its estimate;
     0 runs the TAAU; None (the default) takes :func:`default_slabs` of the engine.
+
+    ``device`` "cuda" keeps such a model's work on the GPU (:attr:`on_device`): it takes frames rendered there
+    (``RayCaster.render(..., on_device=True)``), runs the TAAU and the filter as CUDA kernels and copies only the
+    (H, W, 3) result back. Other models, and every model on the CPU, take host frames.
     """
 
     def __init__(self, engine: Any, max_motion: float = 0.25, max_offscreen: float = 0.5, max_turn: float = 30.0,
-                 max_zoom: float = 2.0, slabs: int | None = None):
+                 max_zoom: float = 2.0, slabs: int | None = None, device: str = "cpu"):
         self.engine = engine
         self.config = engine.config
         self.max_motion, self.max_offscreen = float(max_motion), float(max_offscreen)
@@ -132,8 +136,15 @@ class StatefulUpscaler:
         if self.slabs and not takes_slabs(engine):
             raise ValueError("depth slabs feed a layered TAAU, which only a base-filter model on TAAU (variant XS) "
                              "refines")
+        # on a GPU a base filter on TAAU (variant XS) runs where the frame was rendered: TAAU, filter and all
+        self.on_device = device == "cuda" and self.base_filter is not None and takes_slabs(engine)
         # the layered TAAU on the frames' slabs, or the TAAU on their colour, whichever the model was fitted on
-        self.history = HistoryFeed(self.config, slabs=self.slabs)
+        self.history = HistoryFeed(self.config, slabs=self.slabs, device="cuda" if self.on_device else "cpu")
+        self._device_filter = None
+        if self.on_device:
+            from volsr_core.runtime.base_filter_cuda import CudaBaseFilter
+
+            self._device_filter = CudaBaseFilter(*self.base_filter)
         self._scratch = Scratch()  # work buffers kept between frames: the base filter's, the network's history
         self.resets = 0
         self.last_reset_reason = ""
@@ -149,7 +160,14 @@ class StatefulUpscaler:
         """Both statistics over every ``step``-th pixel each way (about 64 x 64 of them): frame-wide fractions
         that need no more, at a sixteenth of the cost on a 256² frame."""
         h, w = motion.shape[:2]
-        squared_median, offscreen = _motion_statistics(motion, max(1, min(h, w) // 64))
+        step = max(1, min(h, w) // 64)
+        if hasattr(motion, "copy_to_host"):  # on the GPU: only the sample travels
+            from volsr_core.runtime.base_filter_cuda import every_nth
+
+            sample = every_nth(motion, step)
+        else:
+            sample = motion[::step, ::step]
+        squared_median, offscreen = _motion_statistics(sample, step, h, w)
         if squared_median > (self.max_motion * np.hypot(h, w)) ** 2:
             return "large motion"
         if offscreen > self.max_offscreen:
@@ -204,13 +222,15 @@ class StatefulUpscaler:
         """:meth:`upscale` for a network that is only its base filter, run by the engine's CPU kernel
         (:func:`~volsr_core.runtime.base_filter.filter_image`) on TAAU's (H, W, 3) estimate as it comes."""
         colour = frame.color  # a view into the renderer's buffer, read in place by TAAU
-        motion = frame.motion if self._continues(frame, colour) else np.zeros_like(frame.motion)
+        motion = frame.motion if self._continues(frame, colour) else np.zeros(frame.motion.shape, np.float32)
         self.frames.appendleft((colour, motion, np.asarray(frame.jitter, dtype=np.float32)))
         rotation = view_rotation(frame.camera, frame.previous_camera)
         # the layered TAAU is told the pixels per voxel whatever the model's TAAU is told: XS 4x's filter on the told
         # layered estimate beat it on the untold one by 0.7-1.9 dB at 1024² (docs/temporal.md, "Layered history")
         base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth, rotation, frame.pixels_per_voxel,
                             slabs=frame.slabs, background=background)
+        if self._device_filter is not None:
+            return self._device_filter.filter(base, clip_output=True).copy_to_host()
         if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale
             base = upscale_bilinear(colour, self.config.scale)
         return filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True)

@@ -72,14 +72,22 @@ class HistoryFeed:
     and its estimate is the layered TAAU's of them; ``slabs`` (the constructor's) overrides the config's
     ``taau_slabs``, as the upscaler's ``slabs`` does (0: the TAAU on the frame's colour). ``feed.keep(output)``
     hands it the network's output for that frame (a recurrent network's next history). :meth:`reset` is a cut.
+    ``device`` "cuda" runs the TAAU (or the layered TAAU) on the GPU (:mod:`volsr_core.temporal.cuda`): frames and
+    estimates are then device arrays; only for a TAAU history without side outputs (variant XS).
     """
 
-    def __init__(self, config: Any, slabs: int | None = None):
+    def __init__(self, config: Any, slabs: int | None = None, device: str = "cpu"):
         self.mode = history_mode(config)
         self.taau_aux = bool(getattr(config, "taau_aux", False))
         self.slabs = int(getattr(config, "taau_slabs", 0) if slabs is None else slabs)
         self.taau: TemporalUpsampler | None = None
-        if self.mode == "taau":
+        if device == "cuda" and (self.mode != "taau" or self.taau_aux):
+            raise ValueError("the history on the device is a TAAU estimate without side outputs (variant XS)")
+        if self.mode == "taau" and device == "cuda":
+            from volsr_core.temporal.cuda import CudaLayeredUpsampler, CudaTemporalUpsampler
+
+            self.taau = CudaLayeredUpsampler(config.scale) if self.slabs else CudaTemporalUpsampler(config.scale)
+        elif self.mode == "taau":
             self.taau = LayeredUpsampler(config.scale) if self.slabs else taau_upsampler(config.scale, self.taau_aux)
         self.fine_sampling = bool(getattr(config, "taau_fine_sampling", False))
         self.previous: np.ndarray | None = None

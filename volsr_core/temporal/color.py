@@ -20,6 +20,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from volsr_core.temporal.stages import CPU_STAGES
+
 CLAMP_MODES = ("minmax", "variance")
 REPROJECTIONS = ("bilinear", "catmull_rom")
 RECTIFICATIONS = ("clamp", "clip")
@@ -37,16 +39,8 @@ def check_options(clamp: str, rectify: str, reprojection: str, variance_gamma: f
         raise ValueError(f"variance_gamma must be positive, got {variance_gamma}")
 
 
-@_jit
-def to_ycocg(r: float, g: float, b: float) -> tuple[float, float, float]:
-    """RGB to YCoCg: Y = R/4 + G/2 + B/4, Co = (R - B)/2, Cg = G/2 - (R + B)/4."""
-    return 0.25 * r + 0.5 * g + 0.25 * b, 0.5 * (r - b), 0.5 * g - 0.25 * (r + b)
-
-
-@_jit
-def to_rgb(y: float, co: float, cg: float) -> tuple[float, float, float]:
-    """YCoCg to RGB: R = Y + Co - Cg, G = Y + Cg, B = Y - Co - Cg."""
-    return y + co - cg, y + cg, y - co - cg
+to_ycocg = CPU_STAGES.to_ycocg  # RGB to YCoCg: Y = R/4 + G/2 + B/4, Co = (R - B)/2, Cg = G/2 - (R + B)/4
+to_rgb = CPU_STAGES.to_rgb  # YCoCg to RGB: R = Y + Co - Cg, G = Y + Cg, B = Y - Co - Cg
 
 
 @_jit

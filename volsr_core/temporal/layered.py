@@ -35,9 +35,11 @@ import numba
 import numpy as np
 
 from volsr_core.render.layout import SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA
-from volsr_core.temporal.taau import TemporalUpsampler, _moves, _row_window, _splat_weights
+from volsr_core.temporal.stages import CPU_STAGES
+from volsr_core.temporal.taau import TemporalUpsampler, _moves, checked_jitter
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
+_row_window, _splat_weights, _taps = CPU_STAGES.sample_window, CPU_STAGES.splat_weights, CPU_STAGES.bilinear_taps
 _EMPTY = 1e-4  # a slab with at most this alpha at an LR sample shows nothing there
 _INFO = 11  # per slab and LR pixel: RGBA box low (4) and high (4), motion (2), whether the 3x3 shows anything
 
@@ -130,16 +132,13 @@ def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, te
                     ix1 = min(ix + 1, hr_w - 1)
                     tx = sx - ix
                     b00, b01, b10, b11 = (1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty
-                    n = min(b00 * history[k, iy, ix, 4] + b01 * history[k, iy, ix1, 4]
-                            + b10 * history[k, iy1, ix, 4] + b11 * history[k, iy1, ix1, 4], cap)
+                    n = min(_taps(history, k, iy, iy1, ix, ix1, 4, b00, b01, b10, b11), cap)
                 share = 1.0 / (n + a)
                 behind = 1.0 - acc[x, 3]
                 for c in range(4):
-                    o = (w00 * slabs[k, y0, x0, c] + w01 * slabs[k, y0, x1, c]
-                         + w10 * slabs[k, y1, x0, c] + w11 * slabs[k, y1, x1, c]) * inv
+                    o = _taps(slabs, k, y0, y1, x0, x1, c, w00, w01, w10, w11) * inv
                     if n > 0.0:
-                        past = (b00 * history[k, iy, ix, c] + b01 * history[k, iy, ix1, c]
-                                + b10 * history[k, iy1, ix, c] + b11 * history[k, iy1, ix1, c])
+                        past = _taps(history, k, iy, iy1, ix, ix1, c, b00, b01, b10, b11)
                         if rectify:
                             past = min(max(past, info[k, ly, lx, c]), info[k, ly, lx, 4 + c])
                         o = (n * past + a * o) * share
@@ -190,9 +189,7 @@ class LayeredUpsampler(TemporalUpsampler):
         slabs = np.asarray(lr_slabs, dtype=np.float32)
         if slabs.ndim != 4 or slabs.shape[3] != SLAB_CHANNELS or slabs.shape[0] < 1:
             raise ValueError(f"expected slabs (K, h, w, {SLAB_CHANNELS}), got {np.shape(lr_slabs)}")
-        jx, jy = float(jitter[0]), float(jitter[1])
-        if not (-0.5 <= jx < 0.5 and -0.5 <= jy < 0.5):
-            raise ValueError(f"jitter must lie in [-0.5, 0.5), got {jitter}")
+        jx, jy = checked_jitter(jitter)
         n_slabs, h, w = slabs.shape[:3]
         s = self.scale
         shape = (n_slabs, h * s, w * s, 5)  # per slab: premultiplied RGBA, accumulated weight

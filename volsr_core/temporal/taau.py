@@ -48,23 +48,22 @@ import math
 import numba
 import numpy as np
 
-from volsr_core.temporal.color import clip_to_box, to_rgb, to_ycocg
+from volsr_core.temporal.stages import CPU_STAGES
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
+_to_ycocg32, _row_window, _splat_weights = CPU_STAGES.to_ycocg32, CPU_STAGES.sample_window, CPU_STAGES.splat_weights
+_catmull_rom_weights, _history_column = CPU_STAGES.catmull_rom_weights, CPU_STAGES.history_column
+_mix, _rectify = CPU_STAGES.catmull_rom_mix, CPU_STAGES.clamp_to_ycocg_box
 STILL_BELOW = 1e-6  # degrees: a view rotating less than this between frames is still (a still camera, a pan, a zoom)
 
 
 @numba.njit(**_NB)
 def _column_box(lr, rows, i):
-    """YCoCg min and max over LR pixels (rows[0..2], i): (lo0, lo1, lo2, hi0, hi1, hi2). The conversion of
-    :func:`~volsr_core.temporal.color.to_ycocg` in float32 (that one's float64 made TAAU 2-4% slower)."""
+    """YCoCg min and max over LR pixels (rows[0..2], i): (lo0, lo1, lo2, hi0, hi1, hi2), converted in float32."""
     lo0 = lo1 = lo2 = np.float32(1e30)
     hi0 = hi1 = hi2 = np.float32(-1e30)
     for yy in rows:
-        r, g, b = lr[yy, i, 0], lr[yy, i, 1], lr[yy, i, 2]
-        c0 = np.float32(0.25) * r + np.float32(0.5) * g + np.float32(0.25) * b
-        c1 = np.float32(0.5) * (r - b)
-        c2 = np.float32(0.5) * g - np.float32(0.25) * (r + b)
+        c0, c1, c2 = _to_ycocg32(lr[yy, i, 0], lr[yy, i, 1], lr[yy, i, 2])
         lo0, lo1, lo2 = min(lo0, c0), min(lo1, c1), min(lo2, c2)
         hi0, hi1, hi2 = max(hi0, c0), max(hi1, c1), max(hi2, c2)
     return lo0, lo1, lo2, hi0, hi1, hi2
@@ -118,69 +117,6 @@ def _moves(motion, eps):
 
 
 @numba.njit(**_NB)
-def _catmull_rom_weights(t):
-    """The four Catmull-Rom weights at fraction ``t`` in [0, 1) past the second tap: those of
-    :func:`~volsr_core.temporal.color.fetch_catmull_rom`, in float32 as the history is."""
-    t = np.float32(t)
-    t2 = t * t
-    t3 = t2 * t
-    h = np.float32(0.5)
-    return (h * (-t3 + np.float32(2.0) * t2 - t), h * (np.float32(3.0) * t3 - np.float32(5.0) * t2) + np.float32(1.0),
-            h * (np.float32(-3.0) * t3 + np.float32(4.0) * t2 + t), h * (t3 - t2))
-
-
-@numba.njit(**_NB)
-def _history_column(history, c, rows, ay):
-    """The vertical Catmull-Rom pass of history column ``c`` over ``rows`` (4, clamped) with weights ``ay``: RGB."""
-    r0, r1, r2, r3 = rows
-    a0, a1, a2, a3 = ay
-    return (a0 * history[r0, c, 0] + a1 * history[r1, c, 0] + a2 * history[r2, c, 0] + a3 * history[r3, c, 0],
-            a0 * history[r0, c, 1] + a1 * history[r1, c, 1] + a2 * history[r2, c, 1] + a3 * history[r3, c, 1],
-            a0 * history[r0, c, 2] + a1 * history[r1, c, 2] + a2 * history[r2, c, 2] + a3 * history[r3, c, 2])
-
-
-@numba.njit(**_NB)
-def _rectify(h0, h1, h2, box, ly, lx):
-    """Clamp RGB (h0, h1, h2) into the YCoCg min/max box ``box[ly, lx, 0:6]`` (per channel, as
-    :func:`~volsr_core.temporal.color.clip_to_box` does)."""
-    lo = (box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2])
-    hi = (box[ly, lx, 3], box[ly, lx, 4], box[ly, lx, 5])
-    c0, c1, c2 = clip_to_box(to_ycocg(h0, h1, h2), lo, hi, False)
-    return to_rgb(c0, c1, c2)
-
-
-@numba.njit(inline="always", **_NB)
-def _row_window(y, scale, jy, lr_h, inv2s2):
-    """HR row y's LR rows: (ly, y0, y1, dy0, wy0, wy1): the nearest LR row, the 2x2 window's two rows, the
-    distance to the first and the two rows' Gaussian weights (step 1)."""
-    v = (y + 0.5) / scale - 0.5 - jy
-    ly = min(max(int(math.floor(v + 0.5)), 0), lr_h - 1)
-    fy = math.floor(v)
-    y0 = min(max(int(fy), 0), lr_h - 1)
-    y1 = min(max(int(fy) + 1, 0), lr_h - 1)
-    dy0 = v - fy
-    dy1 = dy0 - 1.0
-    return ly, y0, y1, dy0, math.exp(-dy0 * dy0 * inv2s2), math.exp(-dy1 * dy1 * inv2s2)
-
-
-@numba.njit(inline="always", **_NB)
-def _splat_weights(wy0, wy1, wx0, wx1, dy0, fx, tent):
-    """The 2x2 splat's weights (w00, w01, w10, w11), its confidence ``a`` and the factor ``inv`` that normalises
-    the weighted sum (step 1): Gaussian, blended with the bilinear weights at (fx, dy0) by ``tent``."""
-    w00, w01, w10, w11 = wy0 * wx0, wy0 * wx1, wy1 * wx0, wy1 * wx1
-    a = w00 + w01 + w10 + w11
-    inv = 1.0 / a
-    if tent > 0.0:
-        keep = (1.0 - tent) * inv
-        w00 = keep * w00 + tent * (1.0 - dy0) * (1.0 - fx)
-        w01 = keep * w01 + tent * (1.0 - dy0) * fx
-        w10 = keep * w10 + tent * dy0 * (1.0 - fx)
-        w11 = keep * w11 + tent * dy0 * fx
-        inv = 1.0
-    return w00, w01, w10, w11, a, inv
-
-
-@numba.njit(**_NB)
 def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
          rectify, out, new_history, keep_aux, aux):
     hr_h, hr_w = out.shape[0], out.shape[1]
@@ -203,7 +139,7 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         ay = _catmull_rom_weights(ty)
         gated = disocclusion > 0.0 and box[ly, lx, 6] > 0.5
         last_ix = -2
-        k00 = k01 = k02 = k10 = k11 = k12 = k20 = k21 = k22 = k30 = k31 = k32 = np.float32(0.0)
+        k0 = k1 = k2 = k3 = (np.float32(0.0), np.float32(0.0), np.float32(0.0))  # the four columns' RGB
         for x in range(runs[lx], runs[lx + 1]):
             x0 = int(cols[x, 1])
             x1 = int(cols[x, 2])
@@ -233,20 +169,15 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                     n = min(max(top + ty * (bottom - top), 0.0), cap)
                 if n > 0.0:
                     if ix == last_ix + 1:  # the next column of the run: one new vertical pass
-                        k00, k01, k02 = k10, k11, k12
-                        k10, k11, k12 = k20, k21, k22
-                        k20, k21, k22 = k30, k31, k32
-                        k30, k31, k32 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
+                        k0, k1, k2 = k1, k2, k3
+                        k3 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
                     elif ix != last_ix:  # a new start: all four columns (the same column again: kept)
-                        k00, k01, k02 = _history_column(history, max(ix - 1, 0), rows, ay)
-                        k10, k11, k12 = _history_column(history, ix, rows, ay)
-                        k20, k21, k22 = _history_column(history, ix1, rows, ay)
-                        k30, k31, k32 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
+                        k0 = _history_column(history, max(ix - 1, 0), rows, ay)
+                        k1 = _history_column(history, ix, rows, ay)
+                        k2 = _history_column(history, ix1, rows, ay)
+                        k3 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
                     last_ix = ix
-                    ax0, ax1, ax2, ax3 = _catmull_rom_weights(tx)
-                    h0 = ax0 * k00 + ax1 * k10 + ax2 * k20 + ax3 * k30
-                    h1 = ax0 * k01 + ax1 * k11 + ax2 * k21 + ax3 * k31
-                    h2 = ax0 * k02 + ax1 * k12 + ax2 * k22 + ax3 * k32
+                    h0, h1, h2 = _mix(_catmull_rom_weights(tx), k0, k1, k2, k3)
                     if rectify:  # 5. clamp into the YCoCg box of the 3x3 LR neighbourhood
                         h0, h1, h2 = _rectify(h0, h1, h2, box, ly, lx)
             # 7. blend
@@ -296,6 +227,14 @@ def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> tupl
     runs = np.searchsorted(cols[:, 0], np.arange(lr_w + 1)).astype(np.int64)
     runs[lr_w] = hr_w
     return cols, runs
+
+
+def checked_jitter(jitter) -> tuple[float, float]:
+    """``jitter`` as (jx, jy) floats; a ValueError unless both lie in [-0.5, 0.5) (LR pixels)."""
+    jx, jy = float(jitter[0]), float(jitter[1])
+    if not (-0.5 <= jx < 0.5 and -0.5 <= jy < 0.5):
+        raise ValueError(f"jitter must lie in [-0.5, 0.5), got {jitter}")
+    return jx, jy
 
 
 def view_rotation(camera, previous) -> float:
@@ -420,9 +359,7 @@ class TemporalUpsampler:
         if lr.ndim != 3 or lr.shape[2] != 3 or motion.shape != lr.shape[:2] + (2,):
             raise ValueError(f"expected colour (h, w, 3) and motion (h, w, 2), got {lr_color.shape} and "
                              f"{lr_motion.shape}")
-        jx, jy = float(jitter[0]), float(jitter[1])
-        if not (-0.5 <= jx < 0.5 and -0.5 <= jy < 0.5):
-            raise ValueError(f"jitter must lie in [-0.5, 0.5), got {jitter}")
+        jx, jy = checked_jitter(jitter)
         if depth is None:
             depth_arr, disocclusion = np.ones(lr.shape[:2], dtype=np.float32), 0.0
         else:

@@ -1,0 +1,147 @@
+"""The per-pixel stages of temporal upsampling, written once for the CPU and CUDA kernels (as the ray program's).
+
+:func:`build_temporal_stages` takes a decorator (``numba.njit(inline="always")`` for the CPU,
+``numba.cuda.jit(device=True, inline=True)`` for CUDA) and returns the stages compiled with it; only scalar
+maths, ``math`` functions and array reads appear here, so the same source compiles for both targets.
+:data:`CPU_STAGES` is the CPU build the numba kernels of :mod:`~volsr_core.temporal.taau`,
+:mod:`~volsr_core.temporal.layered` and :mod:`~volsr_core.temporal.color` call; :mod:`~volsr_core.temporal.cuda`
+builds its own.
+
+- ``to_ycocg`` / ``to_rgb``: RGB <-> YCoCg (Y = R/4 + G/2 + B/4, Co = (R - B)/2, Cg = G/2 - (R + B)/4), the
+  space whose axis-aligned boxes rectify a history (Karis 2014); ``to_ycocg32`` the same in float32;
+- ``sample_window``: along one axis, the LR samples around an HR pixel centre: the nearest, the two of the 2x2
+  window, the fraction past the first and the two Gaussian weights (TAAU's step 1);
+- ``splat_weights``: the 2x2 splat's weights, its confidence and the factor that normalises it, Gaussian,
+  blended with the bilinear weights by ``tent``;
+- ``catmull_rom_weights``: the four Catmull-Rom weights at a fraction past the second tap (float32, as the
+  history is); ``history_column`` and ``catmull_rom_mix``: a history column's vertical Catmull-Rom pass (RGB), and
+  the horizontal pass over four of them;
+- ``bilinear_taps``: four taps of one channel of a layered (K, H, W, C) array, weighted and summed (the layered
+  TAAU's splat and its bilinear history fetch);
+- ``clamp_to_ycocg_box``: an RGB colour clamped per channel into a YCoCg min/max box (a box array's slots).
+
+Positions (docs/conventions.md): LR sample i sits at LR index-space position i; HR pixel X's centre lies at
+u = (X + 0.5) / scale - 0.5 - jitter there.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple
+
+import numba
+import numpy as np
+
+
+class TemporalStages(NamedTuple):
+    """The stages of one build (see the module docstring)."""
+
+    to_ycocg: Callable
+    to_rgb: Callable
+    to_ycocg32: Callable
+    sample_window: Callable
+    splat_weights: Callable
+    catmull_rom_weights: Callable
+    history_column: Callable
+    catmull_rom_mix: Callable
+    bilinear_taps: Callable
+    clamp_to_ycocg_box: Callable
+
+
+def build_temporal_stages(jit: Callable) -> TemporalStages:
+    """Compile the stages with ``jit``."""
+
+    @jit
+    def to_ycocg(r, g, b):
+        """RGB to YCoCg."""
+        return 0.25 * r + 0.5 * g + 0.25 * b, 0.5 * (r - b), 0.5 * g - 0.25 * (r + b)
+
+    @jit
+    def to_rgb(y, co, cg):
+        """YCoCg to RGB: R = Y + Co - Cg, G = Y + Cg, B = Y - Co - Cg."""
+        return y + co - cg, y + cg, y - co - cg
+
+    @jit
+    def to_ycocg32(r, g, b):
+        """:func:`to_ycocg` in float32 (for the boxes of float32 images; float64 there made TAAU 2-4% slower)."""
+        return (np.float32(0.25) * r + np.float32(0.5) * g + np.float32(0.25) * b, np.float32(0.5) * (r - b),
+                np.float32(0.5) * g - np.float32(0.25) * (r + b))
+
+    @jit
+    def sample_window(x, scale, jitter, lr_n, inv2s2):
+        """HR index ``x`` along an axis of ``lr_n`` LR samples: (nearest, first, second, fraction past the first,
+        weight of the first, weight of the second), indices clamped to [0, lr_n), weights Gaussian
+        (exp(-d² * inv2s2), d in LR px)."""
+        u = (x + 0.5) / scale - 0.5 - jitter
+        nearest = min(max(int(math.floor(u + 0.5)), 0), lr_n - 1)
+        f = math.floor(u)
+        first = min(max(int(f), 0), lr_n - 1)
+        second = min(max(int(f) + 1, 0), lr_n - 1)
+        d0 = u - f
+        d1 = d0 - 1.0
+        return nearest, first, second, d0, math.exp(-d0 * d0 * inv2s2), math.exp(-d1 * d1 * inv2s2)
+
+    @jit
+    def splat_weights(wy0, wy1, wx0, wx1, dy0, fx, tent):
+        """The 2x2 splat's weights (w00, w01, w10, w11), its confidence ``a`` (the Gaussian weights' sum) and the
+        factor ``inv`` that normalises the weighted sum: Gaussian, blended with the bilinear weights at (fx, dy0)
+        by ``tent``."""
+        w00, w01, w10, w11 = wy0 * wx0, wy0 * wx1, wy1 * wx0, wy1 * wx1
+        a = w00 + w01 + w10 + w11
+        inv = 1.0 / a
+        if tent > 0.0:
+            keep = (1.0 - tent) * inv
+            w00 = keep * w00 + tent * (1.0 - dy0) * (1.0 - fx)
+            w01 = keep * w01 + tent * (1.0 - dy0) * fx
+            w10 = keep * w10 + tent * dy0 * (1.0 - fx)
+            w11 = keep * w11 + tent * dy0 * fx
+            inv = 1.0
+        return w00, w01, w10, w11, a, inv
+
+    @jit
+    def catmull_rom_weights(t):
+        """The four Catmull-Rom weights at fraction ``t`` in [0, 1) past the second tap, in float32."""
+        t = np.float32(t)
+        t2 = t * t
+        t3 = t2 * t
+        h = np.float32(0.5)
+        return (h * (-t3 + np.float32(2.0) * t2 - t),
+                h * (np.float32(3.0) * t3 - np.float32(5.0) * t2) + np.float32(1.0),
+                h * (np.float32(-3.0) * t3 + np.float32(4.0) * t2 + t), h * (t3 - t2))
+
+    @jit
+    def history_column(history, c, rows, weights):
+        """The vertical Catmull-Rom pass of column ``c`` of an (H, W, >= 3) history over ``rows`` (four indices,
+        clamped) with ``weights`` (:func:`catmull_rom_weights`): RGB."""
+        r0, r1, r2, r3 = rows
+        a0, a1, a2, a3 = weights
+        return (a0 * history[r0, c, 0] + a1 * history[r1, c, 0] + a2 * history[r2, c, 0] + a3 * history[r3, c, 0],
+                a0 * history[r0, c, 1] + a1 * history[r1, c, 1] + a2 * history[r2, c, 1] + a3 * history[r3, c, 1],
+                a0 * history[r0, c, 2] + a1 * history[r1, c, 2] + a2 * history[r2, c, 2] + a3 * history[r3, c, 2])
+
+    @jit
+    def catmull_rom_mix(weights, k0, k1, k2, k3):
+        """The horizontal Catmull-Rom pass: four columns' RGB (:func:`history_column`) weighted by ``weights``."""
+        a0, a1, a2, a3 = weights
+        return (a0 * k0[0] + a1 * k1[0] + a2 * k2[0] + a3 * k3[0], a0 * k0[1] + a1 * k1[1] + a2 * k2[1] + a3 * k3[1],
+                a0 * k0[2] + a1 * k1[2] + a2 * k2[2] + a3 * k3[2])
+
+    @jit
+    def bilinear_taps(layers, k, y0, y1, x0, x1, c, w00, w01, w10, w11):
+        """Channel ``c`` of layer ``k`` of a (K, H, W, C) array at the four taps (y0, x0), (y0, x1), (y1, x0),
+        (y1, x1), weighted by w00, w01, w10, w11 and summed."""
+        return (w00 * layers[k, y0, x0, c] + w01 * layers[k, y0, x1, c]
+                + w10 * layers[k, y1, x0, c] + w11 * layers[k, y1, x1, c])
+
+    @jit
+    def clamp_to_ycocg_box(r, g, b, box, j, i):
+        """RGB (r, g, b) clamped per channel into the YCoCg box ``box[j, i, 0:3]`` (low) .. ``box[j, i, 3:6]``
+        (high), back in RGB."""
+        y, co, cg = to_ycocg(r, g, b)
+        return to_rgb(min(max(y, box[j, i, 0]), box[j, i, 3]), min(max(co, box[j, i, 1]), box[j, i, 4]),
+                      min(max(cg, box[j, i, 2]), box[j, i, 5]))
+
+    return TemporalStages(to_ycocg, to_rgb, to_ycocg32, sample_window, splat_weights, catmull_rom_weights,
+                          history_column, catmull_rom_mix, bilinear_taps, clamp_to_ycocg_box)
+
+
+CPU_STAGES = build_temporal_stages(numba.njit(inline="always", fastmath=True, boundscheck=False, cache=True))
