@@ -117,3 +117,25 @@ def test_the_xs_pipeline_on_the_device_gives_the_cpu_pipelines_images():
     """VolSR XS with ``device="cuda"``: frame, TAAU (2x) or layered TAAU (4x) and filter on the device, one image back;
     the images of the CPU pipeline, frame by frame, and the LR frame there when asked for."""
     assert run_script(PIPELINE).count("max abs difference") == 2 * 3
+
+
+def test_a_frames_buffers_index_as_numba_device_arrays_index():
+    """The simulator's device arrays are numpy arrays and take any index; numba's own (``DeviceNDArray``, which
+    slices through ``dummyarray.Array``) take no ellipsis. A frame left on the device is read through its buffer
+    properties, so each must index as those do."""
+    from numba.cuda.cudadrv.dummyarray import Array
+
+    from volsr_core.render.features import FeatureFrame
+    from volsr_core.render.layout import OUT_CHANNELS, SLAB_CHANNELS
+    from volsr_core.scene import Camera
+
+    h, w = 6, 8
+    data = Array.from_desc(0, (h, w, OUT_CHANNELS), (w * OUT_CHANNELS * 4, OUT_CHANNELS * 4, 4), 4)
+    slabs = Array.from_desc(0, (2, h, w, SLAB_CHANNELS), (h * w * SLAB_CHANNELS * 4, w * SLAB_CHANNELS * 4,
+                                                          SLAB_CHANNELS * 4, 4), 4)
+    frame = FeatureFrame(data, Camera.framing((0, 1, 0, 1, 0, 1)), slabs=slabs)
+    shapes = {name: getattr(frame, name).shape for name in ("color", "alpha", "depth", "max_rgba", "position",
+                                                             "motion", "motion_depth")}
+    assert shapes == {"color": (h, w, 3), "alpha": (h, w), "depth": (h, w), "max_rgba": (h, w, 4),
+                      "position": (h, w, 3), "motion": (h, w, 2), "motion_depth": (h, w)}
+    assert frame.slabs.reshape(2 * h, w, SLAB_CHANNELS)[0].shape == (2 * h, w, SLAB_CHANNELS)

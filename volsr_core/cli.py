@@ -369,7 +369,8 @@ def add_upscale_parser(sub) -> None:
                     "docs/temporal.md), for an XS model to refine; 0: the TAAU on the frame's colour [auto: the "
                     "model's own, 2 for XS at 4x and more, else 0]")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
-                    help="where rays are cast and the network runs [cpu]")
+                    help="where rays are cast and the network runs; on cuda an XS model's TAAU and filter run there "
+                    "too and one image per frame comes back [cpu]")
     up.add_argument("--sample-distance", type=MILLIMETRES, metavar="MM",
                     help=f"ray step, mm, down to 1/{MAX_SAMPLES_PER_VOXEL} of the smallest spacing "
                     "[half the smallest spacing]")
@@ -448,7 +449,8 @@ def add_bench_parser(sub) -> None:
                    "come from each model's metadata")
     b.add_argument("--threads", type=AT_LEAST_1, default=2, metavar="N", help="onnxruntime intra-op threads [2]")
     b.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
-                   help="where rays are cast and the network runs [cpu]")
+                   help="where rays are cast and the network runs; on cuda TAAU and XS models keep the frame on "
+                   "the GPU [cpu]")
     b.add_argument("--vtk", choices=("gpu", "fixed_point"),
                    help="also VTK's own mapper at full size (vtkGPUVolumeRayCastMapper through EGL on the GPU, or "
                    "its CPU ray caster): the host's renderer, timed in the same run")

@@ -41,7 +41,8 @@ class FeatureFrame:
       slab is empty); composited front to back they give ``color`` (over the background) and ``alpha``.
 
     The arrays are host (numpy) arrays, or GPU device arrays where the frame was rendered ``on_device``
-    (:attr:`on_device`; :meth:`to_host` copies them back).
+    (:attr:`on_device`; :meth:`to_host` copies them back); the buffers are views indexed without an ellipsis,
+    which numba's device arrays do not take.
     """
 
     data: np.ndarray
@@ -82,31 +83,31 @@ class FeatureFrame:
 
     @property
     def color(self) -> np.ndarray:
-        return self.data[..., OUT_COLOR:OUT_COLOR + 3]
+        return self.data[:, :, OUT_COLOR:OUT_COLOR + 3]
 
     @property
     def alpha(self) -> np.ndarray:
-        return self.data[..., OUT_ALPHA]
+        return self.data[:, :, OUT_ALPHA]
 
     @property
     def depth(self) -> np.ndarray:
-        return self.data[..., OUT_DEPTH]
+        return self.data[:, :, OUT_DEPTH]
 
     @property
     def max_rgba(self) -> np.ndarray:
-        return self.data[..., OUT_MAX_RGBA:OUT_MAX_RGBA + 4]
+        return self.data[:, :, OUT_MAX_RGBA:OUT_MAX_RGBA + 4]
 
     @property
     def position(self) -> np.ndarray:
-        return self.data[..., OUT_POSITION:OUT_POSITION + 3]
+        return self.data[:, :, OUT_POSITION:OUT_POSITION + 3]
 
     @property
     def motion(self) -> np.ndarray:
-        return self.data[..., OUT_MOTION:OUT_MOTION + 2]
+        return self.data[:, :, OUT_MOTION:OUT_MOTION + 2]
 
     @property
     def motion_depth(self) -> np.ndarray:
-        return self.data[..., OUT_MOTION_DEPTH]
+        return self.data[:, :, OUT_MOTION_DEPTH]
 
     def to_uint8(self) -> np.ndarray:
         """The colour as an (H, W, 3) uint8 image, ready for PNG."""

@@ -49,11 +49,11 @@ class OnnxEngine:
     ``providers`` defaults to :func:`choose_providers`; ``fp16`` converts the graph to float16
     (inputs and outputs stay float32) when a GPU provider runs it, and is ignored on the CPU;
     ``threads`` sets onnxruntime's intra-op threads (default: its own choice). A network that is
-    only its base filter (variant XS) runs on the CPU in :func:`~volsr_core.runtime.base_filter.
-    filter_image` instead of the session (the same sums, a few times faster), with the weights
-    from the file's metadata in ``base_filter``, whichever providers are given: its input and output
-    live in host memory, and a GPU round trip costs more than the filter (docs/performance-gpu.md);
-    None for every other network.
+    only its base filter (variant XS) runs in the upscaler's own kernels instead of the session, with
+    the weights from the file's metadata in ``base_filter``, whichever providers are given: on the CPU
+    :func:`~volsr_core.runtime.base_filter.filter_image` (the same sums, a few times faster), on a GPU
+    the CUDA kernels next to the frame (``StatefulUpscaler(..., device="cuda")``): a round trip through
+    a provider costs more than the filter (docs/performance-gpu.md); None for every other network.
     """
 
     def __init__(self, path: str | os.PathLike, providers: Sequence[str] | None = None, fp16: bool = False,
@@ -112,8 +112,9 @@ class OnnxEngine:
 class TorchEngine:
     """The PyTorch network behind the same call: numpy in, numpy out, no gradients. A network that is only its base
     filter (variant XS) also hands its weights over as ``base_filter``, as :class:`OnnxEngine` does, so that the
-    upscaler runs it in the CPU kernel on any ``device`` (on a lent H200 the round trip through the GPU cost 17.6-19.6
-    ms a frame at 1024² beyond TAAU 2x: docs/performance-gpu.md); None for every other network."""
+    upscaler runs it in its own kernels, the CPU's or, on "cuda", the CUDA ones next to the frame (on a lent H200 the
+    round trip through torch cost 17.6-19.6 ms a frame at 1024² beyond TAAU 2x: docs/performance-gpu.md); None for
+    every other network."""
 
     def __init__(self, model, device: str = "cpu"):
         require_extra("torch", "running a PyTorch model")
