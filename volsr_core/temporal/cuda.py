@@ -31,6 +31,7 @@ _STAGES = build_temporal_stages(cuda.jit(device=True, inline=True))
 _to_ycocg32, _sample_window, _splat_weights = _STAGES.to_ycocg32, _STAGES.sample_window, _STAGES.splat_weights
 _catmull_rom_weights, _history_column = _STAGES.catmull_rom_weights, _STAGES.history_column
 _mix, _taps, _clamp_to_ycocg_box = _STAGES.catmull_rom_mix, _STAGES.bilinear_taps, _STAGES.clamp_to_ycocg_box
+_nearest_depth, _history_weight = _STAGES.nearest_depth, _STAGES.history_weight
 
 THREADS = (16, 8)
 _MOVES_EPS = 1e-3  # a vector with a component of at least this many LR px moves (as the CPU classes test it)
@@ -122,13 +123,9 @@ def _taau_pixels(history, has_history, lr, motion, depth, box, scale, jx, jy, in
         # 4. disocclusion (depth, where the neighbourhood shows parallax)
         dropped = False
         if disocclusion > 0.0 and box[ly, lx, 6] > 0.5:
-            hd = min(min(history[iy, ix, 4], history[iy, ix1, 4]), min(history[iy1, ix, 4], history[iy1, ix1, 4]))
-            dropped = d - hd > disocclusion
-        if not dropped:
-            # 3. accumulated weight (bilinear) and Catmull-Rom colour
-            top = history[iy, ix, 3] + tx * (history[iy, ix1, 3] - history[iy, ix, 3])
-            bottom = history[iy1, ix, 3] + tx * (history[iy1, ix1, 3] - history[iy1, ix, 3])
-            n = min(max(top + ty * (bottom - top), 0.0), cap)
+            dropped = d - _nearest_depth(history, iy, iy1, ix, ix1) > disocclusion
+        if not dropped:  # 3. accumulated weight (bilinear) and Catmull-Rom colour
+            n = _history_weight(history, iy, iy1, ix, ix1, tx, ty, cap)
         if n > 0.0:
             ay = _catmull_rom_weights(ty)
             rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))

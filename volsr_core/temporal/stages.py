@@ -14,8 +14,10 @@ builds its own.
 - ``splat_weights``: the 2x2 splat's weights, its confidence and the factor that normalises it, Gaussian,
   blended with the bilinear weights by ``tent``;
 - ``catmull_rom_weights``: the four Catmull-Rom weights at a fraction past the second tap (float32, as the
-  history is); ``history_column`` and ``catmull_rom_mix``: a history column's vertical Catmull-Rom pass (RGB), and
-  the horizontal pass over four of them;
+  history is); ``history_column`` and ``catmull_rom_mix``: a history column's vertical Catmull-Rom pass (RGB),
+  and the horizontal pass over four of them;
+- ``nearest_depth`` and ``history_weight``: a TAAU history's least depth and bilinear accumulated weight at its
+  2x2 taps (the disocclusion test, step 3);
 - ``bilinear_taps``: four taps of one channel of a layered (K, H, W, C) array, weighted and summed (the layered
   TAAU's splat and its bilinear history fetch);
 - ``clamp_to_ycocg_box``: an RGB colour clamped per channel into a YCoCg min/max box (a box array's slots).
@@ -41,6 +43,8 @@ class TemporalStages(NamedTuple):
     sample_window: Callable
     splat_weights: Callable
     catmull_rom_weights: Callable
+    nearest_depth: Callable
+    history_weight: Callable
     history_column: Callable
     catmull_rom_mix: Callable
     bilinear_taps: Callable
@@ -109,6 +113,20 @@ def build_temporal_stages(jit: Callable) -> TemporalStages:
                 h * (np.float32(-3.0) * t3 + np.float32(4.0) * t2 + t), h * (t3 - t2))
 
     @jit
+    def nearest_depth(history, iy, iy1, ix, ix1):
+        """The least depth (channel 4) of an (H, W, 5) history at its taps (iy, ix), (iy, ix1), (iy1, ix), (iy1, ix1):
+        TAAU's disocclusion test compares the pixel's depth with it."""
+        return min(min(history[iy, ix, 4], history[iy, ix1, 4]), min(history[iy1, ix, 4], history[iy1, ix1, 4]))
+
+    @jit
+    def history_weight(history, iy, iy1, ix, ix1, tx, ty, cap):
+        """The accumulated weight (channel 3) of an (H, W, 5) history, bilinear at fractions (tx, ty) past (ix, iy),
+        clamped to [0, ``cap``]."""
+        top = history[iy, ix, 3] + tx * (history[iy, ix1, 3] - history[iy, ix, 3])
+        bottom = history[iy1, ix, 3] + tx * (history[iy1, ix1, 3] - history[iy1, ix, 3])
+        return min(max(top + ty * (bottom - top), 0.0), cap)
+
+    @jit
     def history_column(history, c, rows, weights):
         """The vertical Catmull-Rom pass of column ``c`` of an (H, W, >= 3) history over ``rows`` (four indices,
         clamped) with ``weights`` (:func:`catmull_rom_weights`): RGB."""
@@ -141,7 +159,8 @@ def build_temporal_stages(jit: Callable) -> TemporalStages:
                       min(max(cg, box[j, i, 2]), box[j, i, 5]))
 
     return TemporalStages(to_ycocg, to_rgb, to_ycocg32, sample_window, splat_weights, catmull_rom_weights,
-                          history_column, catmull_rom_mix, bilinear_taps, clamp_to_ycocg_box)
+                          nearest_depth, history_weight, history_column, catmull_rom_mix, bilinear_taps,
+                          clamp_to_ycocg_box)
 
 
 CPU_STAGES = build_temporal_stages(numba.njit(inline="always", fastmath=True, boundscheck=False, cache=True))

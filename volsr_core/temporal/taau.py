@@ -54,6 +54,7 @@ _NB = dict(fastmath=True, boundscheck=False, cache=True)
 _to_ycocg32, _row_window, _splat_weights = CPU_STAGES.to_ycocg32, CPU_STAGES.sample_window, CPU_STAGES.splat_weights
 _catmull_rom_weights, _history_column = CPU_STAGES.catmull_rom_weights, CPU_STAGES.history_column
 _mix, _rectify = CPU_STAGES.catmull_rom_mix, CPU_STAGES.clamp_to_ycocg_box
+_nearest_depth, _history_weight = CPU_STAGES.nearest_depth, CPU_STAGES.history_weight
 STILL_BELOW = 1e-6  # degrees: a view rotating less than this between frames is still (a still camera, a pan, a zoom)
 
 
@@ -159,14 +160,9 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                 # 4. disocclusion (depth, where the neighbourhood shows parallax)
                 dropped = False
                 if gated:
-                    hd = min(min(history[iy, ix, 4], history[iy, ix1, 4]),
-                             min(history[iy1, ix, 4], history[iy1, ix1, 4]))
-                    dropped = d - hd > disocclusion
-                if not dropped:
-                    # 3. accumulated weight (bilinear) and Catmull-Rom colour
-                    top = history[iy, ix, 3] + tx * (history[iy, ix1, 3] - history[iy, ix, 3])
-                    bottom = history[iy1, ix, 3] + tx * (history[iy1, ix1, 3] - history[iy1, ix, 3])
-                    n = min(max(top + ty * (bottom - top), 0.0), cap)
+                    dropped = d - _nearest_depth(history, iy, iy1, ix, ix1) > disocclusion
+                if not dropped:  # 3. accumulated weight (bilinear) and Catmull-Rom colour
+                    n = _history_weight(history, iy, iy1, ix, ix1, tx, ty, cap)
                 if n > 0.0:
                     if ix == last_ix + 1:  # the next column of the run: one new vertical pass
                         k0, k1, k2 = k1, k2, k3
