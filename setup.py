@@ -32,7 +32,9 @@ setup(
         # back before importing it (seen compiling and matching the CPU on the lent H200: NumPy 2.5.2, numba-cuda 0.30.4)
         "cuda": ["numba-cuda>=0.20,<0.31"],
         "video": ["imageio>=2.30", "imageio-ffmpeg>=0.4"],  # volsr upscale --video (MP4 through ffmpeg)
-        "dev": ["pytest>=8", "pytest-xdist>=3", "scikit-image>=0.22", "matplotlib>=3.7", "numba-cuda>=0.20"],
+        # NVRTC and NVVM (no driver, no GPU): numba-cuda compiles the CUDA kernels to PTX in the tests
+        "dev": ["pytest>=8", "pytest-xdist>=3", "scikit-image>=0.22", "matplotlib>=3.7", "numba-cuda>=0.20",
+                "nvidia-cuda-nvrtc-cu12>=12.4", "nvidia-cuda-nvcc-cu12>=12.4"],
     },
     entry_points={"console_scripts": ["volsr=volsr_core.cli:main"]},
 )

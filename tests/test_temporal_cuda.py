@@ -139,3 +139,49 @@ def test_a_frames_buffers_index_as_numba_device_arrays_index():
     assert shapes == {"color": (h, w, 3), "alpha": (h, w), "depth": (h, w), "max_rgba": (h, w, 4),
                       "position": (h, w, 3), "motion": (h, w, 2), "motion_depth": (h, w)}
     assert frame.slabs.reshape(2 * h, w, SLAB_CHANNELS)[0].shape == (2 * h, w, SLAB_CHANNELS)
+
+
+def test_the_device_kernels_compile_for_a_gpu():
+    """The simulator runs the kernels as Python; numba-cuda's own typing and lowering, what a GPU compiles, are
+    checked by compiling each of them to PTX for an H100/H200 (sm_90), no GPU needed, with the argument types the
+    pipeline passes (the renderer's buffers are strided views). NVRTC and NVVM come with ``make test`` (the dev extra's
+    ``nvidia-cuda-nvrtc-cu12`` and ``nvidia-cuda-nvcc-cu12``)."""
+    import numba
+    import numpy as np
+    from numba import cuda
+
+    try:
+        cuda.compile_ptx(lambda a: None, "void(float32[:])", cc=(9, 0))
+    except Exception as err:  # numba-cuda raises its own error types when NVRTC or NVVM cannot be found
+        if os.environ.get("CI") == "true":
+            raise
+        pytest.skip(f"numba-cuda cannot compile PTX here ({type(err).__name__}): install the dev extra")
+    from volsr_core.render.layout import OUT_CHANNELS, SLAB_CHANNELS
+    from volsr_core.runtime import base_filter_cuda as bf
+    from volsr_core.temporal import cuda as tc
+
+    frame = np.zeros((8, 8, OUT_CHANNELS), np.float32)
+    colour, motion, depth = frame[:, :, 0:3], frame[:, :, 12:14], frame[:, :, 14]  # views, as FeatureFrame's
+    hr3, slabs = np.zeros((16, 16, 3), np.float32), np.zeros((2, 8, 8, SLAB_CHANNELS), np.float32)
+    flag = np.zeros(1, np.int32)
+    plane, taps, second = np.zeros((16, 16), np.float32), np.zeros(5, np.float32), np.zeros((16, 16), np.uint8)
+    history, box = np.zeros((16, 16, 5), np.float32), np.zeros((8, 8, 8), np.float32)
+    info = np.zeros((2, 8, 8, 11), np.float32)
+    layered = np.zeros((2, 16, 16, 5), np.float32)
+    f32 = np.float32(1.0)
+    calls = [(tc._flag_motion, (motion, 0, 1e-3, flag)),
+             (tc._flag_motion, (slabs.reshape(16, 8, SLAB_CHANNELS), 4, 1e-3, flag)),
+             (tc._taau_prepass, (colour, motion, 2, 0.5, box)),
+             (tc._taau_pixels, (history, True, colour, motion, depth, box, 2, 0.1, 0.2, 8.0, 0.5, 1.0, 0.1, True, hr3,
+                                history)),
+             (tc._layered_prepass, (slabs, True, info)),
+             (tc._layered_pixels, (layered, True, slabs, info, 2, 0.1, 0.2, 8.0, 0.5, 1.0, True, taps[:3], hr3,
+                                   layered)),
+             (bf._luma, (hr3, taps[:3], plane)), (bf._smooth_across, (plane, taps, plane)),
+             (bf._pick_second, (plane, taps, second)),
+             (bf._filter_pixels, (hr3, np.zeros((2, 3, 5, 5), np.float32), np.zeros((2, 3), np.float32), second, True,
+                                  f32, f32, hr3)),
+             (bf._gather_every_nth, (motion, 2, np.zeros((4, 4, 2), np.float32)))]
+    for kernel, args in calls:
+        ptx, _ = cuda.compile_ptx(kernel.py_func, numba.types.void(*(numba.typeof(a) for a in args)), cc=(9, 0))
+        assert ".entry" in ptx, kernel
