@@ -90,6 +90,21 @@ def test_reports_and_target_verdicts(bench_run):
     verdict = {True: "**met**", False: "**not met**"}
     assert f"in ≤ 1/2 of its time: {verdict[fast]}" in md
     assert f"at equal time: {verdict[volsr['psnr'] >= on_curve + 0.5]}" in md
+    cpu = results["machine"]["cpu"]  # the networks' speed depends on the vector instructions: the report says them
+    assert cpu is None or f"CPUs ({cpu})," in md
+
+
+@pytest.mark.parametrize("flags, expected", [("fpu sse2 avx avx2 fma", "AVX2"),
+                                             ("avx2 avx512f avx512bw avx512_vnni", "AVX-512 VNNI"),
+                                             ("avx2 avx512f", "AVX-512"), ("fpu sse2", "no AVX")])
+def test_the_machine_line_names_the_cpu_and_its_vector_instructions(tmp_path, flags, expected):
+    from volsr_core.apps.bench.run import cpu_description
+
+    info = tmp_path / "cpuinfo"
+    info.write_text(f"processor\t: 0\nmodel name\t: AMD  EPYC 9554\nflags\t\t: {flags}\n\n"
+                    f"processor\t: 1\nmodel name\t: AMD  EPYC 9554\nflags\t\t: {flags}\n")
+    assert cpu_description(str(info)) == f"AMD EPYC 9554, {expected}"
+    assert cpu_description(str(tmp_path / "absent")) is None
 
 
 def test_pareto_front_on_hand_made_points():

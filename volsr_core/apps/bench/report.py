@@ -147,8 +147,9 @@ def markdown_report(results: dict[str, Any]) -> str:
              f"the {s['measured_frames']} frames after {s['warmup']} warm-up frames; times are medians over the same "
              f"frames. All methods in one run, interleaved frame by frame; onnxruntime {s['onnxruntime_threads']} "
              f"threads, numba {s['numba_threads']} threads, device {s['device']}. "
-             f"Machine: {results['machine']['processor']}, {results['machine']['cpu_count']} CPUs, "
-             f"{results['machine']['date']}.", "",
+             f"Machine: {results['machine']['processor']}, {results['machine']['cpu_count']} CPUs"
+             + (f" ({results['machine']['cpu']})" if results["machine"].get("cpu") else "")
+             + f", {results['machine']['date']}.", "",
              "Render = ray casting (every feature buffer, motion vectors too); network = what follows it (TAAU "
              "and the network for VolSR, the upscaling for bilinear and TAAU); total is the median of the per-frame "
              "sums, so it need not equal the two medians added. Time and ΔPSNR are relative to native full-size "

@@ -150,6 +150,22 @@ def _check_settings(size, frames, warmup, spp, factors, scales, reference_spp) -
                          f"frames align with the ground truth pixel for pixel); not by {bad}")
 
 
+def cpu_description(cpuinfo: str = "/proc/cpuinfo") -> str | None:
+    """The CPU's model name and its widest vector instructions ("AMD EPYC, AVX2"), read from ``cpuinfo`` (Linux);
+    None where that is not there. The networks' times depend on them: onnxruntime ran the S network at 512² in
+    20.6 ms with AVX-512 VNNI and 37.7 ms with AVX2 alone on the project's machines (docs/performance.md)."""
+    try:
+        text = Path(cpuinfo).read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None
+    fields = {key.strip(): value for key, value in (line.split(":", 1) for line in text.splitlines() if ":" in line)}
+    name = " ".join(fields.get("model name", "").split())
+    flags = set(fields.get("flags", "").split())
+    vector = next((label for flag, label in (("avx512_vnni", "AVX-512 VNNI"), ("avx512f", "AVX-512"), ("avx2", "AVX2"),
+                                             ("avx", "AVX")) if flag in flags), "no AVX")
+    return f"{name or 'unknown model'}, {vector}"
+
+
 # -- the benchmark --------------------------------------------------------------------------------
 def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int], methods: Sequence[Method],
               cameras: Sequence, reference_spp: int = 16, warmup: int = 4, progress=None) -> list[dict[str, Any]]:
@@ -241,6 +257,7 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
                 "numba_threads": numba.get_num_threads(), "device": device, "vtk": vtk}
     machine = {"python": platform.python_version(), "platform": platform.platform(),
                "processor": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+               "cpu": cpu_description(),
                "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
                "date": time.strftime("%Y-%m-%d %H:%M:%S")}
     return {"benchmark": "volsr-bench", "version": 1, "settings": settings, "machine": machine,
