@@ -17,7 +17,7 @@ builds its own.
   history is); ``history_column`` and ``catmull_rom_mix``: a history column's vertical Catmull-Rom pass (RGB),
   and the horizontal pass over four of them;
 - ``nearest_depth`` and ``history_weight``: a TAAU history's least depth and bilinear accumulated weight at its
-  2x2 taps (the disocclusion test, step 3);
+  2x2 taps (TAAU's depth test, step 4, and step 3's weight);
 - ``bilinear_taps``: four taps of one channel of a layered (K, H, W, C) array, weighted and summed (the layered
   TAAU's splat and its bilinear history fetch);
 - ``clamp_to_ycocg_box``: an RGB colour clamped per channel into a YCoCg min/max box (a box array's slots).
