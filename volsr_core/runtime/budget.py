@@ -35,7 +35,7 @@ import numpy as np
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.runtime.methods import ReducedSize, Taau
 from volsr_core.runtime.models import PAYING_NETWORK_SHARE
-from volsr_core.runtime.pipeline import Pipeline
+from volsr_core.runtime.pipeline import KeepsLastFrame, Pipeline
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
@@ -97,7 +97,7 @@ def unpaid(estimates: dict[Level, float]) -> dict[Level, str]:
     return left_out
 
 
-class MethodLevel:
+class MethodLevel(KeepsLastFrame):
     """TAAU alone or a reduced-size render + bilinear (a :mod:`~volsr_core.runtime.methods` method on the
     renderer's caster), with the part of the :class:`~volsr_core.runtime.pipeline.Pipeline` interface the
     budget renderer uses."""
@@ -106,7 +106,6 @@ class MethodLevel:
         self.method = method
         self.low_resolution_size = method.low_resolution_size
         self.last_timings: dict[str, float] = {}
-        self.last_low_resolution = None
 
     def reset(self, reason: str = "") -> None:
         self.method.reset()
@@ -114,7 +113,7 @@ class MethodLevel:
     def render(self, camera: Camera) -> np.ndarray:
         frame = self.method(camera)
         self.last_timings = {"render_ms": frame.ms_render, "network_ms": frame.ms_upscale, "total_ms": frame.ms_total}
-        self.last_low_resolution = frame.low_resolution
+        self.last_frame = frame.low_resolution
         return frame.image
 
 
@@ -128,7 +127,7 @@ class BudgetState:
     ms_estimates: dict[str, float] = field(default_factory=dict)
 
 
-class BudgetRenderer:
+class BudgetRenderer(KeepsLastFrame):
     """Renders ``volume`` at ``size`` within ``budget_ms`` per moving frame (see the module docstring).
 
     - ``choices``: the :class:`Level` list to choose from, finest first (default :func:`levels` of the
@@ -145,8 +144,9 @@ class BudgetRenderer:
     estimates. ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``state`` says what the frame
     was. Like a :class:`Pipeline` it has ``size``, ``scale`` and
     ``low_resolution_size`` (the level drawn last; 1 and ``size`` while still), ``caster``,
-    ``last_timings`` and ``last_low_resolution`` (None after a native or reduced-size level, which render the
-    colour alone), so the batch and the comparison methods take it.
+    ``last_timings``, ``last_frame`` and ``last_low_resolution`` (the LR frame as rendered and in host memory, copied
+    when read; None after a native or reduced-size level, which render the colour alone), so the batch and the
+    comparison methods take it.
     """
 
     def __init__(self, volume: Volume, transfer_function: TransferFunction, budget_ms: float, *,
@@ -185,7 +185,6 @@ class BudgetRenderer:
         self.current: Level | None = None
         self.state = BudgetState()
         self.last_timings: dict[str, float] = {}
-        self.last_low_resolution = None
         self._last_camera: Camera | None = None
         self._still_sum: np.ndarray | None = None
         self._still_count = 0
@@ -268,9 +267,9 @@ class BudgetRenderer:
         ms = 1000.0 * (time.perf_counter() - started)
         pipeline = self.pipelines.get(self.current) if label != "still" else None
         if pipeline is not None:
-            self.last_timings, self.last_low_resolution = dict(pipeline.last_timings), pipeline.last_low_resolution
+            self.last_timings, self.last_frame = dict(pipeline.last_timings), pipeline.last_frame
         else:
-            self.last_timings, self.last_low_resolution = {"render_ms": ms, "network_ms": 0.0, "total_ms": ms}, None
+            self.last_timings, self.last_frame = {"render_ms": ms, "network_ms": 0.0, "total_ms": ms}, None
         if label != "still":
             previous = self.estimates[self.current]
             self.estimates[self.current] = (1.0 - self.smoothing) * previous + self.smoothing * ms

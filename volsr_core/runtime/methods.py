@@ -46,7 +46,9 @@ class MethodFrame:
     image: np.ndarray
     ms_render: float
     ms_upscale: float = 0.0
-    low_resolution: FeatureFrame | None = None  # the LR frame rendered, for methods that render one with features
+    # the LR frame rendered, for methods that render one with features; as rendered: on the GPU where the method
+    # keeps it there (FeatureFrame.to_host copies it back when someone reads it)
+    low_resolution: FeatureFrame | None = None
 
     @property
     def ms_total(self) -> float:
@@ -208,7 +210,7 @@ class Taau(Method):
         ms_network = _elapsed_ms(rendered)
         self.frame += 1
         self.previous = camera
-        return MethodFrame(image, 1000.0 * (rendered - started), ms_network, lr.to_host())
+        return MethodFrame(image, 1000.0 * (rendered - started), ms_network, lr)
 
 
 class VolSR(Method):
@@ -237,4 +239,4 @@ class VolSR(Method):
     def __call__(self, camera: Camera) -> MethodFrame:
         image = self.pipeline.render(camera)
         timings = self.pipeline.last_timings
-        return MethodFrame(image, timings["render_ms"], timings["network_ms"], self.pipeline.last_low_resolution)
+        return MethodFrame(image, timings["render_ms"], timings["network_ms"], self.pipeline.last_frame)

@@ -23,7 +23,19 @@ from volsr_core.scene.volume import Volume
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
 
 
-class Pipeline:
+class KeepsLastFrame:
+    """``last_frame``, the last LR :class:`~volsr_core.render.features.FeatureFrame` as rendered (on the GPU where
+    the frame stayed there; None when there is none), and ``last_low_resolution``, the same in host memory: copied
+    back when read, not every frame."""
+
+    last_frame = None
+
+    @property
+    def last_low_resolution(self):
+        return None if self.last_frame is None else self.last_frame.to_host()
+
+
+class Pipeline(KeepsLastFrame):
     """Renders ``volume`` at 1/``scale`` of ``size`` and upscales it with ``model``.
 
     - ``model``: an .onnx or .pt file, an ``nn.Module``, or None for the shipped model of
@@ -45,7 +57,8 @@ class Pipeline:
       (:func:`~volsr_core.runtime.upscaler.default_slabs`: two for XS at 4x and more, else 0).
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
-    rendering and upscaling that frame. :meth:`update` follows a changed volume, transfer function,
+    rendering and upscaling that frame, ``last_frame`` the LR frame as rendered and ``last_low_resolution`` the
+    same in host memory. :meth:`update` follows a changed volume, transfer function,
     background or size; :meth:`reset` drops the history for the caller's own reasons (the upscaler
     also drops it by itself on camera jumps, implausible motion and a new size). ``resets`` counts
     the drops, ``last_reset_reason`` says why the last one happened.
@@ -78,20 +91,11 @@ class Pipeline:
         self.frame = 0
         self.previous_camera: Camera | None = None
         self.last_timings: dict[str, float] = {}
-        self._last_lr = None
 
     @property
     def low_resolution_size(self) -> tuple[int, int]:
         """(width, height) of the rendered LR frame."""
         return math.ceil(self.size[0] / self.scale), math.ceil(self.size[1] / self.scale)
-
-    @property
-    def last_low_resolution(self):
-        """The last LR :class:`~volsr_core.render.features.FeatureFrame` rendered, in host memory (a frame kept on
-        the GPU is copied back when asked for, not before); None before the first frame."""
-        if self._last_lr is not None and self._last_lr.on_device:
-            self._last_lr = self._last_lr.to_host()
-        return self._last_lr
 
     @property
     def resets(self) -> int:
@@ -147,7 +151,7 @@ class Pipeline:
         done = time.perf_counter()
         self.last_timings = {"render_ms": 1000 * (rendered - started), "network_ms": 1000 * (done - rendered),
                              "total_ms": 1000 * (done - started)}
-        self._last_lr = lr
+        self.last_frame = lr
         self.previous_camera = camera
         self.frame += 1
         return image
