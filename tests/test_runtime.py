@@ -156,7 +156,8 @@ def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(expor
     cameras = orbit(Camera.framing(volume.bounds), 3, degrees=6.0)
     images = [pipeline.render(c) for c in cameras]
     assert all(im.shape == (50, 66, 3) and im.dtype == np.float32 for im in images)
-    assert set(pipeline.last_timings) == {"render_ms", "network_ms", "total_ms"}
+    assert set(pipeline.last_timings) == {"render_ms", "network_ms", "total_ms", "readback_ms"}
+    assert pipeline.last_timings["readback_ms"] == 0.0  # made on the host: nothing to copy back
     lr = pipeline.last_low_resolution
     assert lr.jitter == pytest.approx(halton_jitter(2, jitter_phases(4)))
     assert np.abs(lr.motion).max() > 0.1, "frames after the first carry motion vectors"

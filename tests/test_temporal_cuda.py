@@ -1,5 +1,5 @@
-"""The CUDA builds of TAAU, the layered TAAU and variant XS's base filter agree with the CPU kernels, alone and in the
-pipeline that keeps an XS frame on the device.
+"""The CUDA builds of TAAU, the layered TAAU, variant XS's base filter and the bilinear stretch agree with the CPU
+kernels, alone, in the pipeline that keeps an XS frame on the device and in the benchmark's methods on a CUDA caster.
 
 Frames with motion, parallax, empty slabs, a still and a static view go through the CPU classes and their CUDA
 twins side by side; outputs and histories must agree to float rounding. Without a GPU this runs in Numba's CUDA
@@ -93,8 +93,45 @@ PIPELINE = textwrap.dedent("""
             err = float(np.abs(a - b).max())
             print(f"XS {scale}x in {gpu.slabs} slabs, frame {k}: max abs difference {err:.2e}")
             assert err < 1e-4 and a.std() > 0.01, (err, a.std())
+        assert gpu.last_timings["readback_ms"] > 0.0 == cpu.last_timings["readback_ms"]  # timed apart, on the GPU
         lr = gpu.last_low_resolution
         assert not lr.on_device and np.abs(lr.data - cpu.last_low_resolution.data).max() < 1e-4
+""")
+
+METHODS = textwrap.dedent("""
+    import numpy as np
+    from numba import cuda
+    from volsr_core.io import make_phantom
+    from volsr_core.render.raycaster import RayCaster
+    from volsr_core.runtime.methods import Native, ReducedSize, Taau
+    from volsr_core.scene import Camera, Volume, get_preset
+    from volsr_core.scene.camera_paths import orbit
+    from volsr_core.temporal.frames_cuda import resize_bilinear_device
+    from volsr_core.temporal.resample import resize_bilinear
+
+    rng = np.random.default_rng(3)
+    for (h, w), (height, width) in (((5, 7), (16, 21)), ((6, 4), (6, 4)), ((3, 3), (11, 2))):  # up, same, mixed
+        image = rng.random((h, w, 3), dtype=np.float32)
+        err = float(np.abs(resize_bilinear(image, width, height)
+                           - resize_bilinear_device(cuda.to_device(image), width, height).copy_to_host()).max())
+        print(f"bilinear {w}x{h} -> {width}x{height}: max abs difference {err:.2e}")
+        assert err < 1e-6, err
+
+    volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
+    cameras = orbit(Camera.framing(volume.bounds), 3, degrees=3.0)
+    casters = [RayCaster(volume, get_preset("CT-Phantom"), device=device, start_jitter="ign") for device in ("cpu",
+                                                                                                       "cuda")]
+    size = (32, 24)
+    for make in (lambda c: Native(c, size, 1), lambda c: Native(c, size, 2), lambda c: ReducedSize(c, size, 3),
+                 lambda c: Taau(c, size, 2), lambda c: Taau(c, size, 4, slabs=2)):
+        cpu, gpu = make(casters[0]), make(casters[1])
+        for k, camera in enumerate(cameras):
+            a, b = cpu(camera), gpu(camera)
+            assert isinstance(b.image, np.ndarray) and b.image.shape == a.image.shape == (size[1], size[0], 3)
+            assert a.ms_readback == 0.0 and b.ms_readback > 0.0 and b.ms_total > 0.0
+            err = float(np.abs(a.image - b.image).max())
+            print(f"{gpu.label}, frame {k}: max abs difference {err:.2e}")
+            assert err < 1e-4 and a.image.std() > 0.01, (err, a.image.std())
 """)
 
 
@@ -117,6 +154,13 @@ def test_the_xs_pipeline_on_the_device_gives_the_cpu_pipelines_images():
     """VolSR XS with ``device="cuda"``: frame, TAAU (2x) or layered TAAU (4x) and filter on the device, one image back;
     the images of the CPU pipeline, frame by frame, and the LR frame there when asked for."""
     assert run_script(PIPELINE).count("max abs difference") == 2 * 3
+
+
+def test_every_method_on_a_cuda_caster_makes_the_cpu_images_on_the_device():
+    """Native (1 and 2 spp), 1/3 size + bilinear, TAAU and the layered TAAU on a CUDA ray caster: the full-size image
+    made on the device (the bilinear stretch too) gives the CPU methods' images, and its copy to the host is timed
+    apart (``ms_readback``, 0 on the CPU)."""
+    assert run_script(METHODS).count("max abs difference") == 3 + 5 * 3
 
 
 def test_a_frames_buffers_index_as_numba_device_arrays_index():
@@ -159,6 +203,7 @@ def test_the_device_kernels_compile_for_a_gpu():
     from volsr_core.render.layout import OUT_CHANNELS, SLAB_CHANNELS
     from volsr_core.runtime import base_filter_cuda as bf
     from volsr_core.temporal import cuda as tc
+    from volsr_core.temporal import frames_cuda as fc
 
     frame = np.zeros((8, 8, OUT_CHANNELS), np.float32)
     colour, motion, depth = frame[:, :, 0:3], frame[:, :, 12:14], frame[:, :, 14]  # views, as FeatureFrame's
@@ -181,7 +226,11 @@ def test_the_device_kernels_compile_for_a_gpu():
              (bf._pick_second, (plane, taps, second)),
              (bf._filter_pixels, (hr3, np.zeros((2, 3, 5, 5), np.float32), np.zeros((2, 3), np.float32), second, True,
                                   f32, f32, hr3)),
-             (bf._gather_every_nth, (motion, 2, np.zeros((4, 4, 2), np.float32)))]
+             (bf._gather_every_nth, (motion, 2, np.zeros((4, 4, 2), np.float32))),
+             (fc._bilinear_pixels, (hr3, np.zeros((16, 2), np.int64), np.zeros((16, 2), np.float32),
+                                    np.zeros((16, 2), np.int64), np.zeros((16, 2), np.float32), hr3)),
+             (fc._add_sample, (np.zeros((16, 16, 3), np.float64), hr3)),
+             (fc._divide, (np.zeros((16, 16, 3), np.float64), 2.0, hr3))]
     for kernel, args in calls:
         ptx, _ = cuda.compile_ptx(kernel.py_func, numba.types.void(*(numba.typeof(a) for a in args)), cc=(9, 0))
         assert ".entry" in ptx, kernel

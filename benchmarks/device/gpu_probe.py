@@ -13,14 +13,15 @@ without the copy. Per bench volume and output size this measures, with the devic
 - the CUDA ray cast alone (``_render_pixels``, all buffers already on the device), at every size the bench
   renders: full size (native; N spp = N casts), round(size / F) (native 1/F size), size / S with motion
   vectors and, where the bench's VolSR row had them, depth slabs;
-- the bilinear upscale on the device (``torch.nn.functional.interpolate``, as a GPU viewer would stretch);
+- the bilinear upscale on the device (:func:`~volsr_core.temporal.frames_cuda.resize_bilinear_device`, what the
+  bench's baseline runs on a CUDA caster, as a GPU viewer stretches);
 - TAAU and the layered TAAU as CUDA kernels (:mod:`volsr_core.temporal.cuda`) on a frame rendered and left on the
-  device, for VolSR XS with its filter (:mod:`volsr_core.runtime.base_filter_cuda`) after it and, for these and
-  TAAU alone, the image copied back: what ``Pipeline(device="cuda")`` does for XS, whose rows the bench on the GPU
-  now measures end to end too;
+  device, for VolSR XS with its filter (:mod:`volsr_core.runtime.base_filter_cuda`) after it: what
+  ``Pipeline(device="cuda")`` does for XS, whose rows the bench on the GPU now measures end to end too;
 - each shipped U-Net's network on ``--torch-device`` at its LR size, inputs already there, after its TAAU on the
   device (without the side outputs the S and M models also read: a lower bound on their step);
 
+no method's image is copied to the host (the bench on the GPU times that copy apart, the same for every method),
 and prices each row of the CPU run's ``bench.json`` (``--bench``/<size>-2deg; PSNRs do not depend on the device:
 equal to 0.01 dB on the H200) by them: where each method would lie against the native + bilinear curve were its
 frame kept on the device, which is what decides whether that can pay. Writes ``OUT/probe.json`` and
@@ -120,12 +121,12 @@ def network_ms(torch, variant: str, scale: int, height: int, width: int, device:
         return median_ms(lambda: model(*inputs), sync, repeats)
 
 
-def post_ms(caster: RayCaster, cameras: list, lr: int, scale: int, slabs: int, variant: str | None, copy: bool,
+def post_ms(caster: RayCaster, cameras: list, lr: int, scale: int, slabs: int, variant: str | None,
             repeats: int) -> float:
     """Median ms of what follows the ray cast of a moving ``lr``² frame on the device: the TAAU (with ``slabs``, the
-    layered TAAU: :mod:`volsr_core.temporal.cuda`), for ``variant`` "XS" its filter after it
-    (:mod:`volsr_core.runtime.base_filter_cuda`), and with ``copy`` the image copied to the host (what
-    ``Pipeline(device="cuda")`` does for XS, and the bench's TAAU on the device); the frame rendered there once."""
+    layered TAAU: :mod:`volsr_core.temporal.cuda`) and, for ``variant`` "XS", its filter after it
+    (:mod:`volsr_core.runtime.base_filter_cuda`), as ``Pipeline(device="cuda")`` and the bench's TAAU on the device
+    run them; the frame rendered there once."""
     from numba import cuda
 
     from volsr_core.runtime.base_filter_cuda import CudaBaseFilter
@@ -151,19 +152,20 @@ def post_ms(caster: RayCaster, cameras: list, lr: int, scale: int, slabs: int, v
     def step() -> None:
         image = accumulate(frames[1])
         if device_filter is not None:
-            image = device_filter.filter(image, clip_output=True)
-        if copy:
-            image.copy_to_host()
+            device_filter.filter(image, clip_output=True)
 
     accumulate(frames[0])
     return median_ms(step, cuda.synchronize, repeats)
 
 
-def bilinear_ms(torch, height: int, width: int, out_height: int, out_width: int, device: str, repeats: int) -> float:
-    image = torch.rand(1, 3, height, width, device=device)
-    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
-    return median_ms(lambda: torch.nn.functional.interpolate(image, size=(out_height, out_width), mode="bilinear",
-                                                             align_corners=False), sync, repeats)
+def bilinear_ms(height: int, width: int, out_height: int, out_width: int, repeats: int) -> float:
+    """Median ms of the bench's bilinear stretch of a ``width`` x ``height`` device image to the output size."""
+    from numba import cuda
+
+    from volsr_core.temporal.frames_cuda import resize_bilinear_device
+
+    image = cuda.to_device(np.random.default_rng(0).random((height, width, 3), dtype=np.float32))
+    return median_ms(lambda: resize_bilinear_device(image, out_width, out_height), cuda.synchronize, repeats)
 
 
 def probe_volume(spec: str, size: int, cpu_rows: list[dict], torch_device: str, repeats: int) -> dict:
@@ -189,18 +191,17 @@ def probe_volume(spec: str, size: int, cpu_rows: list[dict], torch_device: str, 
         elif row["method"] == "bilinear":
             lr = max(1, round(size / s))
             render = part(f"cast {lr}²", lambda: march.ms(lr, lr, False))
-            after = part(f"bilinear {lr}² -> {size}²", lambda: bilinear_ms(torch, lr, lr, size, size, torch_device,
-                                                                          repeats))
+            after = part(f"bilinear {lr}² -> {size}²", lambda: bilinear_ms(lr, lr, size, size, repeats))
         elif row["method"] in ("taau", "volsr"):
             lr, slabs = size // s, row.get("slabs") or 0
             layers = f" in {slabs} slabs" if slabs else ""
             render = part(f"cast {lr}² moving{layers}", lambda: march.ms(lr, lr, True, slabs))
             xs = row["method"] == "volsr" and row["variant"] == "XS"
-            if row["method"] == "taau" or xs:  # the whole step on the device, the image copied back
-                name = f"TAAU {s}x{layers}" + (" + XS filter" if xs else "") + f" at {lr}², image copied back"
-                after = part(name, lambda: post_ms(caster, cameras, lr, s, slabs, row.get("variant"), True, repeats))
+            if row["method"] == "taau" or xs:  # the whole step on the device
+                name = f"TAAU {s}x{layers}" + (" + XS filter" if xs else "") + f" at {lr}²"
+                after = part(name, lambda: post_ms(caster, cameras, lr, s, slabs, row.get("variant"), repeats))
             else:  # a U-Net: the TAAU it refines on the device, then the network on its inputs there
-                after = part(f"TAAU {s}x at {lr}²", lambda: post_ms(caster, cameras, lr, s, 0, None, False, repeats))
+                after = part(f"TAAU {s}x at {lr}²", lambda: post_ms(caster, cameras, lr, s, 0, None, repeats))
                 after += part(f"network {row['variant']} {s}x at {lr}²",
                               lambda: network_ms(torch, row["variant"], s, lr, lr, torch_device, repeats))
         else:

@@ -1,8 +1,8 @@
 # The device command behind docs/performance-gpu.md (the device tool's run, carry [".gpu"]): here first
 #   echo /.gpu/ >> .git/info/exclude; python benchmarks/device/gpu_bench.py pack .gpu/volumes
 #   pip download --no-deps -d .gpu/whl pydicom==3.0.2
-# then on the device: the real-GPU checks of the CUDA ray caster and of the CUDA TAAU, layered TAAU, XS filter and XS
-# pipeline (the tests' scripts, their differences printed), the device-resident projection (gpu_probe.py: the parts
+# then on the device: the real-GPU checks of the CUDA ray caster and of the CUDA TAAU, layered TAAU, XS filter, XS
+# pipeline and the bench's methods on the device (the tests' scripts, their differences printed), the device-resident projection (gpu_probe.py: the parts
 # timed on the GPU, the CPU runs' PSNRs placed at those times) within PROBE_S seconds, then volsr bench on CUDA (RUNS,
 # e.g. 512/2,1024/2; RUNS= for none) within BENCH_S seconds.
 set -o pipefail; export PYTHONUNBUFFERED=1; S=/tmp/site
@@ -14,8 +14,8 @@ python3 -c "import numpy, numba, numba_cuda, torch; print(numpy.__version__, num
 VOLSR_TEST_REAL_CUDA=1 timeout 200 python3 -c "import sys, types; sys.modules['SimpleITK'] = types.ModuleType('SimpleITK')
 sys.path.insert(0, 'tests'); import test_render_cuda as t; exec(t.SCRIPT.format(tests='tests'))" 2>&1 | tee $OUT/cuda_check.log
 VOLSR_TEST_REAL_CUDA=1 timeout 200 python3 -c "import sys, types; sys.modules['SimpleITK'] = types.ModuleType('SimpleITK')
-sys.path.insert(0, 'tests'); import test_temporal_cuda as t; exec(t.SCRIPT); exec(t.PIPELINE)" 2>&1 \
-    | tail -8 | tee $OUT/temporal_cuda_check.log
+sys.path.insert(0, 'tests'); import test_temporal_cuda as t; exec(t.SCRIPT); exec(t.PIPELINE); exec(t.METHODS)" 2>&1 \
+    | tail -12 | tee $OUT/temporal_cuda_check.log
 timeout ${PROBE_S:-150} python3 benchmarks/device/gpu_probe.py $OUT/probe --volumes .gpu/volumes 2>&1 | tee $OUT/probe.log
 [ -z "${RUNS-512/2,1024/2}" ] || timeout ${BENCH_S:-320} python3 benchmarks/device/gpu_bench.py run $OUT \
     ${RUNS-512/2,1024/2} --volumes .gpu/volumes 2>&1 | tee $OUT/bench.log | grep -v "bench:"

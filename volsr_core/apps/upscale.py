@@ -194,7 +194,7 @@ class InputSummary:
     low_resolution_size: tuple[int, int] = (0, 0)
     slabs: int = 0  # depth slabs each LR frame was rendered in (the layered TAAU's), 0: none
     timings: dict[str, list[float]] = field(default_factory=lambda: {"render_ms": [], "network_ms": [],
-                                                                     "total_ms": []})
+                                                                     "total_ms": [], "readback_ms": []})
     method_ms: dict[str, list[float]] = field(default_factory=dict)  # method -> total ms per frame
     psnr: dict[str, list[float]] = field(default_factory=dict)   # method -> dB per frame
     reference_spp: int = 0
@@ -204,7 +204,7 @@ class InputSummary:
     error: str | None = None
 
     def ms(self, stage: str) -> float:
-        """Median ms per frame of ``stage`` (render_ms, network_ms, total_ms); the first frame's
+        """Median ms per frame of ``stage`` (render_ms, network_ms, total_ms, readback_ms); the first frame's
         one-off costs (kernel compilation, session warm-up) do not move a median."""
         values = self.timings[stage]
         return statistics.median(values) if values else float("nan")
@@ -232,6 +232,8 @@ class InputSummary:
         text = (f"{self.name}: {self.frames} frames of {w}x{h}{source}; VolSR ms per frame (median): "
                 f"LR render {self.ms('render_ms'):.1f}, network {self.ms('network_ms'):.1f}, "
                 f"total {self.ms('total_ms'):.1f}")
+        if self.ms("readback_ms") > 0:  # a frame made on the GPU
+            text += f" (then copied from the GPU in {self.ms('readback_ms'):.1f})"
         if len(self.method_ms) > 1 or self.psnr:
             text += (f"; per method (median ms, mean PSNR vs {self.reference_spp}-spp native)" if self.psnr
                      else "; per method (median ms)")

@@ -8,6 +8,7 @@ import numpy as np
 
 from volsr_core.render import layout as L
 from volsr_core.render.classification import ClassificationTables, block_min_max, build_tables, empty_blocks
+from volsr_core.render.device import is_device_array
 from volsr_core.render.features import FeatureFrame
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
@@ -174,15 +175,32 @@ class RayCaster:
         return c
 
     def render_color(self, camera: Camera, width: int, height: int | None = None, *,
-                     jitter: Sequence[float] = (0.0, 0.0), seed: int = 0, out: np.ndarray | None = None) -> np.ndarray:
+                     jitter: Sequence[float] = (0.0, 0.0), seed: int = 0, out: np.ndarray | None = None,
+                     on_device: bool = False) -> np.ndarray:
         """The (H, W, 3) float32 colour of :meth:`render` alone (the same values), from the colour-only ray program:
         no feature tracking per sample (1-2% of the ray march on the CPU) and, on CUDA, only RGB copied back. What
-        native rendering and its reduced sizes need; ``out`` may pass an (H, W, 3) float32 array to reuse."""
+        native rendering and its reduced sizes need; ``out`` may pass an (H, W, 3) float32 array to reuse (a device
+        array with ``on_device``). ``on_device`` (device "cuda" only) leaves the image on the GPU, ready when this
+        returns."""
         height = _checked_height(width, height)
-        if out is None or out.shape != (height, width, 3) or out.dtype != np.float32:
-            out = np.empty((height, width, 3), dtype=np.float32)
+        self._check_on_device(on_device)
+        if (out is None or out.shape != (height, width, 3) or out.dtype != np.float32
+                or is_device_array(out) != on_device):
+            out = self._new_buffer((height, width, 3), on_device)
         self._cast(camera, width, height, (float(jitter[0]), float(jitter[1])), None, seed, out, 0)
         return out
+
+    def _check_on_device(self, on_device: bool) -> None:
+        if on_device and self.device != "cuda":
+            raise ValueError(f"on_device needs the cuda device, this ray caster renders on {self.device}")
+
+    @staticmethod
+    def _new_buffer(shape: tuple[int, ...], on_device: bool):
+        """An uninitialised float32 array of ``shape``: on the GPU (numba's device array) or in host memory."""
+        if on_device:
+            from numba import cuda
+            return cuda.device_array(shape, dtype=np.float32)
+        return np.empty(shape, dtype=np.float32)
 
     def render(self, camera: Camera, width: int, height: int | None = None, *,
                jitter: Sequence[float] = (0.0, 0.0), previous_camera: Camera | None = None,
@@ -199,14 +217,10 @@ class RayCaster:
         height = _checked_height(width, height)
         if slabs < 0 or int(slabs) != slabs:
             raise ValueError(f"slabs must be a whole number >= 0, got {slabs}")
-        if on_device and self.device != "cuda":
-            raise ValueError(f"on_device needs the cuda device, this ray caster renders on {self.device}")
+        self._check_on_device(on_device)
         jitter = (float(jitter[0]), float(jitter[1]))
-        if on_device:
-            from numba import cuda
-            out = cuda.device_array((height, width, L.OUT_CHANNELS), dtype=np.float32)
-        elif out is None or out.shape != (height, width, L.OUT_CHANNELS) or out.dtype != np.float32:
-            out = np.empty((height, width, L.OUT_CHANNELS), dtype=np.float32)
+        if on_device or out is None or out.shape != (height, width, L.OUT_CHANNELS) or out.dtype != np.float32:
+            out = self._new_buffer((height, width, L.OUT_CHANNELS), on_device)  # on the device, a new one per frame
         slab_out = self._cast(camera, width, height, jitter, previous_camera, seed, out, int(slabs))
         voxel = float(min(self.volume.spacing))
         return FeatureFrame(out, camera, jitter, previous_camera, voxel / camera.pixel_size_at_focus(height),
@@ -220,11 +234,7 @@ class RayCaster:
         prev_vp = np.eye(4) if previous_camera is None else previous_camera.view_projection(width / height)
         params = self._params(seed, previous_camera is not None, slabs)
         slab_shape = (slabs, height, width, L.SLAB_CHANNELS) if slabs else (1, 1, 1, L.SLAB_CHANNELS)
-        if hasattr(out, "copy_to_host"):  # a device array: the slabs stay on the device too
-            from numba import cuda
-            slab_out = cuda.device_array(slab_shape, dtype=np.float32)
-        else:
-            slab_out = np.empty(slab_shape, dtype=np.float32)
+        slab_out = self._new_buffer(slab_shape, is_device_array(out))  # a device out: the slabs stay there too
         t = self.tables
         if self.device == "cuda":
             from volsr_core.render.cuda import render_cuda

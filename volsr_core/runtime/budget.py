@@ -112,7 +112,8 @@ class MethodLevel(KeepsLastFrame):
 
     def render(self, camera: Camera) -> np.ndarray:
         frame = self.method(camera)
-        self.last_timings = {"render_ms": frame.ms_render, "network_ms": frame.ms_upscale, "total_ms": frame.ms_total}
+        self.last_timings = {"render_ms": frame.ms_render, "network_ms": frame.ms_upscale, "total_ms": frame.ms_total,
+                             "readback_ms": frame.ms_readback}
         self.last_frame = frame.low_resolution
         return frame.image
 

@@ -2,7 +2,9 @@
 
 Every method renders one frame per call along a camera path (the temporal ones keep their history)
 and returns a :class:`MethodFrame`: the (H, W, 3) float32 image in [0, 1] (H, W = ``size``) and the
-ms spent ray casting and upscaling.
+ms spent ray casting and upscaling. With a ray caster on "cuda" every method makes its full-size image on the
+GPU, where a viewer shows it (the baseline's stretch too, as VTK's), and its times end when the GPU is done; the
+image's copy to the host, the same for every method, is timed apart (``ms_readback``).
 
 - :class:`Native`: full size, ``spp`` Halton-jittered samples per pixel averaged (1: the pixel
   centres, no jitter);
@@ -26,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from volsr_core.render.device import ready_at, to_host
 from volsr_core.render.features import FeatureFrame
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.scene.camera import Camera
@@ -49,6 +52,8 @@ class MethodFrame:
     # the LR frame rendered, for methods that render one with features; as rendered: on the GPU where the method
     # keeps it there (FeatureFrame.to_host copies it back when someone reads it)
     low_resolution: FeatureFrame | None = None
+    # the copy of the full-size image from the GPU to the host, not in ms_total (0 where it was made on the host)
+    ms_readback: float = 0.0
 
     @property
     def ms_total(self) -> float:
@@ -84,8 +89,8 @@ class Method:
         """Forget the history (no-op for methods without one)."""
 
 
-def _elapsed_ms(since: float) -> float:
-    return 1000.0 * (time.perf_counter() - since)
+def _on_device(caster: RayCaster | None) -> bool:
+    return getattr(caster, "device", "cpu") == "cuda"
 
 
 class Native(Method):
@@ -104,9 +109,12 @@ class Native(Method):
 
     def __call__(self, camera: Camera) -> MethodFrame:
         started = time.perf_counter()
-        image = render_supersampled(self.caster, camera, *self.size, spp=self.spp, seed=self.frame * self.spp)
+        image = render_supersampled(self.caster, camera, *self.size, spp=self.spp, seed=self.frame * self.spp,
+                                    on_device=_on_device(self.caster))
+        rendered = ready_at(image)
         self.frame += 1
-        return MethodFrame(image, _elapsed_ms(started))
+        image, ms_readback = to_host(image)
+        return MethodFrame(image, 1000.0 * (rendered - started), ms_readback=ms_readback)
 
 
 class ReducedSize(Method):
@@ -139,12 +147,21 @@ class ReducedSize(Method):
         return np.clip(resize_bicubic(colour, width, height), 0.0, 1.0)
 
     def __call__(self, camera: Camera) -> MethodFrame:
+        on_device = self.kind == "bilinear" and _on_device(self.caster)  # a bicubic stretch runs on the host
         started = time.perf_counter()
-        lr = self.caster.render_color(camera, *self.low_resolution_size, seed=self.frame)  # the colour alone, as VTK
+        lr = self.caster.render_color(camera, *self.low_resolution_size, seed=self.frame,  # the colour alone, as VTK
+                                      on_device=on_device)
         rendered = time.perf_counter()
-        image = self.upscale(lr)
+        if on_device:
+            from volsr_core.temporal.frames_cuda import resize_bilinear_device
+
+            image = resize_bilinear_device(lr, *self.size)
+        else:
+            image = self.upscale(lr)
+        done = ready_at(image)
         self.frame += 1
-        return MethodFrame(image, 1000.0 * (rendered - started), _elapsed_ms(rendered))
+        image, ms_readback = to_host(image)
+        return MethodFrame(image, 1000.0 * (rendered - started), 1000.0 * (done - rendered), ms_readback=ms_readback)
 
 
 class Taau(Method):
@@ -152,14 +169,14 @@ class Taau(Method):
     vectors to the previous camera, accumulated by :func:`~volsr_core.sr.history.taau_upsampler`; with
     ``slabs`` K > 0 rendered in K depth slabs and accumulated by the layered TAAU (one history per slab). With a
     ray caster on "cuda" the frame stays on the GPU and the TAAU runs there (:mod:`volsr_core.temporal.cuda`), as
-    VolSR XS's does; the image is copied back."""
+    VolSR XS's does; the image is copied back after the timed step."""
 
     kind = "taau"
 
     def __init__(self, caster: RayCaster | None, size: tuple[int, int], scale: int, slabs: int = 0):
         super().__init__(size)
         self.caster, self.scale, self.slabs = caster, int(scale), int(slabs)
-        self.on_device = getattr(caster, "device", "cpu") == "cuda"
+        self.on_device = _on_device(caster)
         if self.on_device:
             from volsr_core.temporal.cuda import CudaLayeredUpsampler, CudaTemporalUpsampler
 
@@ -204,13 +221,13 @@ class Taau(Method):
         rotation = view_rotation(camera, self.previous)
         if self.slabs:
             image = self.upsampler(lr.slabs, lr.jitter, self.caster.background, rotation, lr.pixels_per_voxel)
-            image = image.copy_to_host() if self.on_device else image
         else:
-            image = self.upscale(lr.color, lr.motion, lr.jitter, lr.motion_depth, rotation, lr.pixels_per_voxel)
-        ms_network = _elapsed_ms(rendered)
+            image = self.upsampler(lr.color, lr.motion, lr.jitter, lr.motion_depth, rotation, lr.pixels_per_voxel)
+        done = ready_at(image)
         self.frame += 1
         self.previous = camera
-        return MethodFrame(image, 1000.0 * (rendered - started), ms_network, lr)
+        image, ms_readback = to_host(image)
+        return MethodFrame(image, 1000.0 * (rendered - started), 1000.0 * (done - rendered), lr, ms_readback)
 
 
 class VolSR(Method):
@@ -239,4 +256,5 @@ class VolSR(Method):
     def __call__(self, camera: Camera) -> MethodFrame:
         image = self.pipeline.render(camera)
         timings = self.pipeline.last_timings
-        return MethodFrame(image, timings["render_ms"], timings["network_ms"], self.pipeline.last_frame)
+        return MethodFrame(image, timings["render_ms"], timings["network_ms"], self.pipeline.last_frame,
+                           timings.get("readback_ms", 0.0))

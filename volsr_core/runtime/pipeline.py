@@ -14,6 +14,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from volsr_core.render.device import ready_at, to_host
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.runtime.engines import open_engine
 from volsr_core.runtime.upscaler import StatefulUpscaler
@@ -57,9 +58,10 @@ class Pipeline(KeepsLastFrame):
       (:func:`~volsr_core.runtime.upscaler.default_slabs`: two for XS at 4x and more, else 0).
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
-    rendering and upscaling that frame, ``last_frame`` the LR frame as rendered and ``last_low_resolution`` the
-    same in host memory. :meth:`update` follows a changed volume, transfer function,
-    background or size; :meth:`reset` drops the history for the caller's own reasons (the upscaler
+    rendering and upscaling that frame (``render_ms``, ``network_ms``, ``total_ms``: on the GPU until its work
+    is done) and copying the image from the GPU (``readback_ms``, 0 on the host), ``last_frame`` the LR frame
+    as rendered and ``last_low_resolution`` the same in host memory. :meth:`update` follows a changed volume,
+    transfer function, background or size; :meth:`reset` drops the history for the caller's own reasons (the upscaler
     also drops it by itself on camera jumps, implausible motion and a new size). ``resets`` counts
     the drops, ``last_reset_reason`` says why the last one happened.
     """
@@ -147,14 +149,15 @@ class Pipeline(KeepsLastFrame):
         lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame,
                                 slabs=self.slabs, on_device=self.upscaler.on_device)
         rendered = time.perf_counter()
-        image = self.upscaler.upscale(lr, self.caster.background)[: self.size[1], : self.size[0]]
-        done = time.perf_counter()
+        image = self.upscaler.upscale(lr, self.caster.background)
+        done = ready_at(image)
+        image, readback_ms = to_host(image)
         self.last_timings = {"render_ms": 1000 * (rendered - started), "network_ms": 1000 * (done - rendered),
-                             "total_ms": 1000 * (done - started)}
+                             "total_ms": 1000 * (done - started), "readback_ms": readback_ms}
         self.last_frame = lr
         self.previous_camera = camera
         self.frame += 1
-        return image
+        return image[: self.size[1], : self.size[0]]
 
 
 def _tf_key(tf: TransferFunction) -> str:

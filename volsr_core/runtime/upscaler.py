@@ -118,8 +118,9 @@ class StatefulUpscaler:
     0 runs the TAAU; None (the default) takes :func:`default_slabs` of the engine.
 
     ``device`` "cuda" keeps such a model's work on the GPU (:attr:`on_device`): it takes frames rendered there
-    (``RayCaster.render(..., on_device=True)``), runs the TAAU and the filter as CUDA kernels and copies only the
-    (H, W, 3) result back. Other models, and every model on the CPU, take host frames.
+    (``RayCaster.render(..., on_device=True)``), runs the TAAU and the filter as CUDA kernels and returns the
+    (H, W, 3) result there, a device array for the caller to copy back (``Pipeline`` does, after timing the step).
+    Other models, and every model on the CPU, take host frames and return host images.
     """
 
     def __init__(self, engine: Any, max_motion: float = 0.25, max_offscreen: float = 0.5, max_turn: float = 30.0,
@@ -190,8 +191,9 @@ class StatefulUpscaler:
         return bool(self.frames)
 
     def upscale(self, frame: FeatureFrame, background: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-        """The HR image for ``frame`` (see the class); float32 (H, W, 3) in [0, 1]. ``background``: the RGB the
-        renderer composited over, which the layered TAAU composites its slabs over."""
+        """The HR image for ``frame`` (see the class); float32 (H, W, 3) in [0, 1], a device array where
+        :attr:`on_device`. ``background``: the RGB the renderer composited over, which the layered TAAU composites its
+        slabs over."""
         if self.base_filter is not None:
             return self._filtered(frame, background)
         inputs = network_inputs(frame, self.config.features)
@@ -230,7 +232,7 @@ class StatefulUpscaler:
         base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth, rotation, frame.pixels_per_voxel,
                             slabs=frame.slabs, background=background)
         if self._device_filter is not None:
-            return self._device_filter.filter(base, clip_output=True).copy_to_host()
+            return self._device_filter.filter(base, clip_output=True)  # on the device: the caller copies it back
         if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale
             base = upscale_bilinear(colour, self.config.scale)
         return filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True)

@@ -150,10 +150,16 @@ def markdown_report(results: dict[str, Any]) -> str:
              f"Machine: {results['machine']['processor']}, {results['machine']['cpu_count']} CPUs"
              + (f" ({results['machine']['cpu']})" if results["machine"].get("cpu") else "")
              + f", {results['machine']['date']}.", "",
-             "Render = ray casting (every feature buffer, motion vectors too); network = what follows it (TAAU "
+             "Render = ray casting (native and its reduced sizes: the colour alone, as VTK's renderer; TAAU and "
+             "VolSR: every feature buffer, motion vectors too); network = what follows it (TAAU "
              "and the network for VolSR, the upscaling for bilinear and TAAU); total is the median of the per-frame "
              "sums, so it need not equal the two medians added. Time and ΔPSNR are relative to native full-size "
              "1-spp rendering.", ""]
+    readback = [r["ms_readback"] for r in results["rows"] if r.get("ms_readback")]
+    if readback:
+        lines += [f"On the GPU every method makes its full-size image there (the bilinear stretch too, as VTK's) and "
+                  f"its times end when the GPU is done; the image's copy to the host for scoring, {min(readback):.1f}-"
+                  f"{max(readback):.1f} ms a frame (medians per method), is in none of them.", ""]
     if not results["models"]:
         lines += ["No VolSR model was benchmarked (no shipped model for the chosen variants and scales, and no "
                   "`--models-dir`).", ""]

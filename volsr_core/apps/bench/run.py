@@ -16,6 +16,8 @@ pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image). Quality is 
 frames after ``warmup`` warm-up frames; times are medians over the same frames (the warm-up also
 absorbs kernel compilation). ``ms_render`` is the ray casting, ``ms_network`` what follows it (TAAU
 and the network for VolSR, the bilinear or TAAU upscaling for those, 0 for native), ``ms_total`` their sum.
+On ``device="cuda"`` every method makes its full-size image on the GPU and its times end when the GPU is done;
+``ms_readback``, the image's copy to the host for scoring (0 on the CPU), is not in ``ms_total``.
 
 :func:`run_benchmark` runs it; :mod:`volsr_core.apps.bench.report` checks the targets
 (docs/performance.md) and writes bench.json, bench.md and bench.png; the volumes come from
@@ -180,7 +182,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
                                          seed=10**6 + t * reference_spp))
         if progress is not None:
             progress.update()
-    records = [{"render": [], "network": [], "psnr": [], "ssim": []} for _ in methods]
+    records = [{"render": [], "network": [], "readback": [], "psnr": [], "ssim": []} for _ in methods]
     for t, camera in enumerate(cameras):
         k = t % len(methods)
         for i in list(range(k, len(methods))) + list(range(k)):
@@ -190,6 +192,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
                 rec = records[i]
                 rec["render"].append(frame.ms_render)
                 rec["network"].append(frame.ms_upscale)
+                rec["readback"].append(frame.ms_readback)
                 rec["psnr"].append(psnr)
                 rec["ssim"].append(ssim)
             if progress is not None:
@@ -205,6 +208,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
             "ms_render": _finite(statistics.median(rec["render"])),
             "ms_network": _finite(statistics.median(rec["network"])),
             "ms_total": _finite(statistics.median(total)),
+            "ms_readback": _finite(statistics.median(rec["readback"])),
             "psnr": _finite(float(np.mean(rec["psnr"]))), "ssim": _finite(float(np.mean(rec["ssim"]))),
             "psnr_frames": [_finite(v) for v in rec["psnr"]],
             "ms_total_frames": [_finite(v) for v in total],
