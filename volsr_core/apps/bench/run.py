@@ -40,6 +40,7 @@ import numpy as np
 from volsr_core.apps.bench.report import check_targets
 from volsr_core.apps.bench.scenes import BenchVolume, load_bench_volume
 from volsr_core.errors import InputError, require
+from volsr_core.render.device import to_host
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.runtime.methods import Method, Native, ReducedSize, Taau, VolSR
 from volsr_core.scene.camera_paths import orbit_around
@@ -178,8 +179,9 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
     width, height = size
     truth = []
     for t, camera in enumerate(cameras):  # ray-start seeds apart from the methods' (which count frames from 0)
-        truth.append(render_supersampled(caster, camera, width, height, spp=reference_spp,
-                                         seed=10**6 + t * reference_spp))
+        image = render_supersampled(caster, camera, width, height, spp=reference_spp, seed=10**6 + t * reference_spp,
+                                    on_device=caster.device == "cuda")  # on a GPU summed there, one copy back
+        truth.append(to_host(image)[0])
         if progress is not None:
             progress.update()
     records = [{"render": [], "network": [], "readback": [], "psnr": [], "ssim": []} for _ in methods]
