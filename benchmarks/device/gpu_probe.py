@@ -26,7 +26,8 @@ and prices each row of the CPU run's ``bench.json`` (``--bench``/<size>-2deg; PS
 equal to 0.01 dB on the H200) by them: where each method would lie against the native + bilinear curve were its
 frame kept on the device, which is what decides whether that can pay. Writes ``OUT/probe.json`` and
 ``OUT/probe.md`` (the parts, then per volume each row's projected ms, PSNR and, for VolSR, its margin over the
-projected native + bilinear curve, ``check_targets``' target 2).
+projected native + bilinear curve, ``check_targets``' target 2; last, what a kernel launch, an allocation, an upload
+and a round trip cost on the host side, :func:`host_side_ms`).
 
 Volumes come as ``gpu_bench.py pack`` records (``--volumes``, default ``benchmarks/device/volumes``); here,
 ``NUMBA_ENABLE_CUDASIM=1 ... --sizes 16 --torch-device cpu`` runs it through numba's CUDA simulator on the
@@ -168,6 +169,26 @@ def bilinear_ms(height: int, width: int, out_height: int, out_width: int, repeat
     return median_ms(lambda: resize_bilinear_device(image, out_width, out_height), cuda.synchronize, repeats)
 
 
+def host_side_ms(repeats: int) -> dict[str, float]:
+    """Median ms of the per-frame calls a frame on the device pays beside its kernels' work, each alone: a kernel
+    launch through numba-cuda (one thread, one array argument), a new device array of two 1024² slab histories
+    (40 MB), a small upload (a camera array) and a 4-byte copy back (a flag: a round trip). XS's device path makes
+    about eight launches, six allocations, five uploads and two round trips a frame, native 1 spp one, two, three
+    and none: set against the cast and kernel times above, they say whether pooling them can move a verdict."""
+    from numba import cuda
+
+    @cuda.jit
+    def touch(a):
+        a[0] += 1.0
+
+    flag, cam = cuda.to_device(np.zeros(1, np.float32)), np.zeros(32, np.float64)
+    return {"kernel launch": median_ms(lambda: touch[1, 1](flag), cuda.synchronize, repeats),
+            "device array of 40 MB": median_ms(lambda: cuda.device_array((2, 1024, 1024, 5), np.float32),
+                                               cuda.synchronize, repeats),
+            "upload of 256 bytes": median_ms(lambda: cuda.to_device(cam), cuda.synchronize, repeats),
+            "copy back of 4 bytes": median_ms(lambda: flag.copy_to_host(), cuda.synchronize, repeats)}
+
+
 def probe_volume(spec: str, size: int, cpu_rows: list[dict], torch_device: str, repeats: int) -> dict:
     """The parts and the priced rows of one volume at ``size``²."""
     import torch
@@ -242,6 +263,11 @@ def main(argv: list[str]) -> None:
     if args.volumes.is_dir():
         Volume.load = read_packed(args.volumes)
     args.out.mkdir(parents=True, exist_ok=True)
+    header = (f"# Frames kept on the device: a projection\n\nParts timed by `benchmarks/device/gpu_probe.py` "
+              f"(torch on {args.torch_device}, medians of {args.repeats}); PSNRs from the CPU runs in {args.bench}; "
+              "TAAU, the layered TAAU and XS's filter as CUDA kernels on frames left on the device; a U-Net's "
+              "network timed apart, its inputs there (its TAAU's side outputs not computed).")
+    host_side = host_side_ms(args.repeats)
     results = []
     for size in (int(s) for s in args.sizes.split(",")):
         rows = json.loads((args.bench / f"{size}-2deg" / "bench.json").read_text())["rows"]
@@ -251,14 +277,12 @@ def main(argv: list[str]) -> None:
             started = time.time()
             result = probe_volume(spec if name != "phantom" else None, size, mine, args.torch_device, args.repeats)
             results.append({"size": size, **result})
-            (args.out / "probe.json").write_text(json.dumps(results, indent=1))  # after each volume: a cut keeps it
+            # after each volume: a run cut short keeps what it measured
+            (args.out / "probe.json").write_text(json.dumps({"host_side_ms": host_side, "volumes": results}, indent=1))
+            (args.out / "probe.md").write_text(markdown(results, header) + "\n## Per-call costs beside the kernels\n\n"
+                                               "| call | ms |\n|---|---:|\n"
+                                               + "".join(f"| {k} | {ms:.4f} |\n" for k, ms in host_side.items()))
             print(f"== {size}² {name}: {time.time() - started:.0f} s", flush=True)
-    header = (f"# Frames kept on the device: a projection\n\nParts timed by `benchmarks/device/gpu_probe.py` "
-              f"(torch on {args.torch_device}, medians of {args.repeats}); PSNRs from the CPU runs in {args.bench}; "
-              "TAAU, the layered TAAU and XS's filter as CUDA kernels on frames left on the device; a U-Net's "
-              "network timed apart, its inputs there (its TAAU's side outputs not computed).")
-    (args.out / "probe.md").write_text(markdown(results, header))
-
 
 if __name__ == "__main__":
     main(sys.argv[1:])
