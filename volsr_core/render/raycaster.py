@@ -219,8 +219,9 @@ class RayCaster:
             raise ValueError(f"slabs must be a whole number >= 0, got {slabs}")
         self._check_on_device(on_device)
         jitter = (float(jitter[0]), float(jitter[1]))
+        # on the device always a new buffer: an upscaler there holds the last frame's
         if on_device or out is None or out.shape != (height, width, L.OUT_CHANNELS) or out.dtype != np.float32:
-            out = self._new_buffer((height, width, L.OUT_CHANNELS), on_device)  # on the device, a new one per frame
+            out = self._new_buffer((height, width, L.OUT_CHANNELS), on_device)
         slab_out = self._cast(camera, width, height, jitter, previous_camera, seed, out, int(slabs))
         voxel = float(min(self.volume.spacing))
         return FeatureFrame(out, camera, jitter, previous_camera, voxel / camera.pixel_size_at_focus(height),
