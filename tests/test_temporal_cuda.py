@@ -229,7 +229,7 @@ def test_the_device_kernels_compile_for_a_gpu():
              (bf._gather_every_nth, (motion, 2, np.zeros((4, 4, 2), np.float32))),
              (fc._bilinear_pixels, (hr3, np.zeros((16, 2), np.int64), np.zeros((16, 2), np.float32),
                                     np.zeros((16, 2), np.int64), np.zeros((16, 2), np.float32), hr3)),
-             (fc._add_sample, (np.zeros((16, 16, 3), np.float64), hr3)),
+             (fc._add_sample, (np.zeros((16, 16, 3), np.float64), hr3, True)),
              (fc._divide, (np.zeros((16, 16, 3), np.float64), 2.0, hr3))]
     for kernel, args in calls:
         ptx, _ = cuda.compile_ptx(kernel.py_func, numba.types.void(*(numba.typeof(a) for a in args)), cc=(9, 0))

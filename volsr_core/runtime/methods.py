@@ -129,6 +129,11 @@ class ReducedSize(Method):
         self.caster, self.kind = caster, interpolation
         self.scale = int(factor) if float(factor).is_integer() else float(factor)
         self.frame = 0
+        self.on_device = interpolation == "bilinear" and _on_device(caster)  # a bicubic stretch runs on the host
+        if self.on_device:
+            from volsr_core.temporal.frames_cuda import resize_bilinear_device
+
+            self._resize_on_device = resize_bilinear_device
 
     @property
     def label(self) -> str:
@@ -147,15 +152,12 @@ class ReducedSize(Method):
         return np.clip(resize_bicubic(colour, width, height), 0.0, 1.0)
 
     def __call__(self, camera: Camera) -> MethodFrame:
-        on_device = self.kind == "bilinear" and _on_device(self.caster)  # a bicubic stretch runs on the host
         started = time.perf_counter()
         lr = self.caster.render_color(camera, *self.low_resolution_size, seed=self.frame,  # the colour alone, as VTK
-                                      on_device=on_device)
+                                      on_device=self.on_device)
         rendered = time.perf_counter()
-        if on_device:
-            from volsr_core.temporal.frames_cuda import resize_bilinear_device
-
-            image = resize_bilinear_device(lr, *self.size)
+        if self.on_device:
+            image = self._resize_on_device(lr, *self.size)
         else:
             image = self.upscale(lr)
         done = ready_at(image)

@@ -63,11 +63,12 @@ def resize_bilinear_device(image, width: int, height: int):
 
 
 @cuda.jit
-def _add_sample(total, sample):
+def _add_sample(total, sample, first):
+    """``total`` += ``sample`` per pixel; the ``first`` sample is written instead (no zeroed buffer to upload)."""
     x, y = cuda.grid(2)
     if y < total.shape[0] and x < total.shape[1]:
         for c in range(total.shape[2]):
-            total[y, x, c] += sample[y, x, c]
+            total[y, x, c] = sample[y, x, c] if first else total[y, x, c] + sample[y, x, c]
 
 
 @cuda.jit
@@ -82,11 +83,11 @@ class DeviceAverage:
     """The mean of device (H, W, C) float32 samples, summed in float64 on the device: ``add`` each, then ``mean``."""
 
     def __init__(self, shape: tuple[int, int, int]):
-        self.total = cuda.to_device(np.zeros(shape, dtype=np.float64))
+        self.total = cuda.device_array(shape, dtype=np.float64)
         self.count = 0
 
     def add(self, sample) -> None:
-        _add_sample[_blocks(sample.shape[1], sample.shape[0]), THREADS](self.total, sample)
+        _add_sample[_blocks(sample.shape[1], sample.shape[0]), THREADS](self.total, sample, self.count == 0)
         self.count += 1
 
     def mean(self):
