@@ -110,6 +110,25 @@ def table_row(cells: str, ms: list[float], difference: float) -> str:
     return row + " |"
 
 
+def interleaved(methods: dict, cameras: list, truth: dict, warmup: int) -> dict:
+    """Every method of ``methods`` (key -> a ``runtime.methods.Method``) on every camera, interleaved frame by frame
+    (the order rotating per frame, as ``volsr bench`` runs them): key -> (median ms per frame, mean PSNR against
+    ``truth`` (frame -> image) over the frames from ``warmup`` on)."""
+    from volsr_core.sr.metrics import psnr_ssim
+
+    keys = list(methods)
+    ms: dict = {key: [] for key in keys}
+    psnr: dict = {key: [] for key in keys}
+    for t, camera in enumerate(cameras):
+        first = t % len(keys)
+        for key in keys[first:] + keys[:first]:
+            frame = methods[key](camera)
+            if t >= warmup:
+                ms[key].append(frame.ms_total)
+                psnr[key].append(psnr_ssim(frame.image, truth[t], channel_axis=-1)[0])
+    return {key: (statistics.median(ms[key]), float(np.mean(psnr[key]))) for key in keys}
+
+
 def orbit_parser(description: str) -> argparse.ArgumentParser:
     """The options a side-by-side kernel benchmark shares: the volume, sizes, scales, orbit and ``--against``."""
     parser = argparse.ArgumentParser(description=description)

@@ -13,15 +13,11 @@ interleaved frame by frame in one process).
 """
 from __future__ import annotations
 
-import statistics
-
-import numpy as np
-from bench_taau import orbit_parser, orbit_scene
+from bench_taau import interleaved, orbit_parser, orbit_scene
 
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.runtime.methods import Method, ReducedSize, VolSR
 from volsr_core.runtime.pipeline import Pipeline
-from volsr_core.sr.metrics import psnr_ssim
 from volsr_core.temporal import render_supersampled
 
 WARMUP = 4
@@ -48,19 +44,10 @@ def main() -> None:
                 sample_distance=default_step * k), "XS")
             methods[("native 1/4 size + bilinear", k)] = ReducedSize(coarse, (size, size), 4)
             methods[("native 1/3 size + bilinear", k)] = ReducedSize(coarse, (size, size), 3)
-        keys = list(methods)
-        ms: dict[tuple[str, float], list[float]] = {key: [] for key in keys}
-        psnr: dict[tuple[str, float], list[float]] = {key: [] for key in keys}
-        for t, camera in enumerate(cameras):
-            first = t % len(keys)
-            for key in keys[first:] + keys[:first]:
-                frame = methods[key](camera)
-                if t >= WARMUP:
-                    ms[key].append(frame.ms_total)
-                    psnr[key].append(psnr_ssim(frame.image, truth[t], channel_axis=-1)[0])
-        for key in sorted(keys):
-            print(f"| {size}² | {key[0]} | x{key[1]:g} | {statistics.median(ms[key]):.1f} | "
-                  f"{np.mean(psnr[key]):.2f} |", flush=True)
+        row = interleaved(methods, cameras, truth, WARMUP)
+        for key in sorted(row):
+            print(f"| {size}² | {key[0]} | x{key[1]:g} | {row[key][0]:.1f} | "
+                  f"{row[key][1]:.2f} |", flush=True)
 
 
 if __name__ == "__main__":

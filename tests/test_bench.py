@@ -43,7 +43,7 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
     _, results = bench_run
     rows = by_label(results)
     expected = ({f"native {n} spp" for n in SPP} | {f"native 1/{f} size + bilinear" for f in FACTORS}
-                | {f"TAAU {s}x" for s in SCALES} | {"VolSR S 4x"})
+                | {f"TAAU {s}x" for s in SCALES} | {"VolSR S 4x", "VolSR S 4x + bilinear 2x"})
     assert set(rows) == expected
     assert {r["scene"] for r in rows.values()} == {"phantom, CT-Phantom on -1024..3071 (auto)"}
     for r in rows.values():
@@ -54,6 +54,9 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
         assert (r["ms_network"] == 0) == (r["method"] == "native")
     volsr = rows["VolSR S 4x"]  # scale and variant came from the ONNX metadata
     assert (volsr["method"], volsr["variant"], volsr["scale"], volsr["model"]) == ("volsr", "S", 4, "s4.onnx")
+    stretched = rows["VolSR S 4x + bilinear 2x"]  # --stretch 2 by default: the 4x model's image stretched, an 8x point
+    assert (stretched["scale"], stretched["stretch"], stretched["model"], volsr["stretch"]) == (8, 2, "s4.onnx", 1)
+    assert results["settings"]["stretches"] == [2]
     assert results["settings"]["onnxruntime_threads"] == 2 and results["settings"]["measured_frames"] == 3
 
 
@@ -71,6 +74,7 @@ def test_reports_and_target_verdicts(bench_run):
     md = (out / "bench.md").read_text()
     assert "## phantom, CT-Phantom" in md and "| VolSR S 4x |" in md and "| native 1 spp |" in md
     assert "after 1 warm-up frames" in md and "8-spp" in md
+    assert "| VolSR S 4x + bilinear 2x |" in md and "the model's image at 1/K of the size, stretched" in md
     assert "1. VolSR at 4x reaches at least native 1-spp PSNR" in md and "2. Every VolSR point lies at least" in md
     from PIL import Image
 
@@ -230,3 +234,14 @@ def test_vtk_row_is_vtks_own_mapper_in_the_same_run(tmp_path):
     assert vtk["psnr"] > 15, "VTK draws the same volume, framing and look (not identical: another renderer)"
     assert abs(vtk["psnr"] - native["psnr"]) < 25
     assert "| VTK CPU mapper |" in (out / "bench.md").read_text()
+
+
+def test_the_stretched_rows_are_the_models_whose_scale_times_the_stretch_is_benchmarked():
+    from volsr_core.apps.bench.run import ModelSpec, model_scales, volsr_rows
+
+    assert model_scales([2, 4, 8], [2]) == [2, 4, 8] and model_scales([4], [2]) == [2, 4]
+    assert model_scales([4, 8], [2, 4]) == [2, 4, 8] and model_scales([2], [2]) == [2]  # no 1x model
+    xs2, s4, s8 = ModelSpec("xs2.onnx", "XS", 2), ModelSpec("s4.onnx", "S", 4), ModelSpec("s8.onnx", "S", 8)
+    assert volsr_rows([xs2, s4, s8], [2, 4, 8], [2]) == [(xs2, 1), (xs2, 2), (s4, 1), (s4, 2), (s8, 1)]
+    assert volsr_rows([xs2, s4], [4], [2]) == [(xs2, 2), (s4, 1)]
+    assert volsr_rows([xs2, s4], [2, 4, 8], [1]) == [(xs2, 1), (s4, 1)], "stretch 1: no stretched rows"

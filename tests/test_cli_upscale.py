@@ -136,6 +136,15 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path, model, capsys):
     assert "volsr-S-4x.onnx: takes no depth slabs (--slabs 2)" in capsys.readouterr().err
     assert main(["upscale", "--slabs", "1", "--budget-ms", "50", "--out", str(tmp_path)]) == 2
     assert "--slabs: --budget-ms runs each model with its own depth slabs" in capsys.readouterr().err
+    assert main(["upscale", "--scale", "4", "--stretch", "3", "--out", str(tmp_path)]) == 2
+    assert "--stretch: 3 does not divide --scale 4" in capsys.readouterr().err
+    assert main(["upscale", "--stretch", "2", "--budget-ms", "50", "--out", str(tmp_path)]) == 2
+    assert "--stretch: --budget-ms chooses its own levels" in capsys.readouterr().err
+    assert main(["upscale", "--model", str(model), "--scale", "4", "--stretch", "2", "--out", str(tmp_path)]) == 2
+    assert "upscales 4x, not 2x (--scale 4 / --stretch 2)" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stopped:
+        main(["upscale", "--stretch", "0", "--out", str(tmp_path)])
+    assert stopped.value.code == 2 and "must be auto or an integer in [1, 8], got '0'" in capsys.readouterr().err
     with pytest.raises(SystemExit) as stopped:
         main(["upscale", "--slabs", "9", "--out", str(tmp_path)])
     assert stopped.value.code == 2 and "must be auto or an integer in [0, 8], got '9'" in capsys.readouterr().err
@@ -154,6 +163,16 @@ def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
     assert main(["upscale", "--orbit", "2", "--size", "32", "--scale", "4", "--slabs", "0",
                  "--out", str(tmp_path / "d")]) == 0
     assert "from 8x8;" in capsys.readouterr().out
+    assert main(["upscale", "--orbit", "2", "--size", "32", "--scale", "4", "--stretch", "2",
+                 "--out", str(tmp_path / "e")]) == 0  # the 2x model to 16x16, stretched
+    out = capsys.readouterr().out
+    assert "4x (2x + bilinear 2x) with volsr-XS-2x.onnx" in out and "from 8x8, the model's image stretched 2x;" in out
+    assert "# volsr upscale: 4x (2x + bilinear 2x) with volsr-XS-2x.onnx" in (tmp_path / "e/summary.md").read_text()
+    # --stretch auto, the default: where a voxel spans two output pixels or more (the phantom filling 512²), XS 2x
+    assert main(["upscale", "--orbit", "1", "--size", "512", "--scale", "4", "--out", str(tmp_path / "f")]) == 0
+    out = capsys.readouterr().out
+    assert "4x with volsr-XS-4x.onnx or stretched by the view (--stretch auto)" in out
+    assert "from 128x128, the model's image stretched 2x;" in out
 
 
 @pytest.mark.parametrize("stop", [KeyboardInterrupt, RuntimeError])

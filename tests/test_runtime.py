@@ -263,3 +263,69 @@ def test_the_upscaler_drops_the_history_on_a_camera_jump_in_its_frames():
     turned.camera, turned.previous_camera = start.azimuth(60), start
     assert np.allclose(upscaler.upscale(turned), StatefulUpscaler(engine).upscale(turned), atol=1e-6)
     assert upscaler.last_reset_reason == "camera turned" and upscaler.resets == 1
+
+
+def test_a_stretched_pipeline_is_the_model_at_a_smaller_size_then_bilinear():
+    """``Pipeline(scale=4, stretch=2)`` renders the 1/4-size frame, runs the 2x model to half the size and stretches
+    its image bilinearly: the images of a 2x pipeline at that size stretched by ``resize_bilinear``, frame by frame,
+    at a size the scale does not divide (the LR frame ceil(size / 4), the stretched image cropped as an unstretched
+    one is)."""
+    from volsr_core.io import make_phantom
+    from volsr_core.runtime.methods import VolSR
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.scene import Volume, get_preset
+    from volsr_core.scene.camera_paths import orbit
+    from volsr_core.temporal.jitter import halton_jitter, jitter_phases
+    from volsr_core.temporal.resample import resize_bilinear
+
+    volume = Volume.from_record(make_phantom(shape=(40, 40, 40)))
+    tf = get_preset("CT-Phantom")
+    stretched = Pipeline(volume, tf, scale=4, stretch=2, variant="XS", size=(66, 50))
+    inner = Pipeline(volume, tf, scale=2, variant="XS", size=(34, 26))
+    assert (stretched.scale, stretched.model_scale, stretched.slabs) == (4, 2, 0)  # XS 2x: TAAU, no slabs
+    assert stretched.low_resolution_size == inner.low_resolution_size == (17, 13)
+    for k, camera in enumerate(orbit(Camera.framing(volume.bounds), 4, degrees=3.0)):
+        image = stretched.render(camera)
+        expected = resize_bilinear(inner.render(camera), 68, 52)[:50, :66]
+        assert image.shape == (50, 66, 3) and np.abs(image - expected).max() == 0.0, k
+        assert stretched.last_low_resolution.jitter == pytest.approx(halton_jitter(k, jitter_phases(2)))
+    assert image.std() > 0.01
+    assert stretched.last_timings["network_ms"] > 0
+    assert VolSR(stretched, "XS").label == "VolSR XS 2x + bilinear 2x" and VolSR(stretched, "XS").scale == 4
+    with pytest.raises(ValueError, match="divides the scale, got 3 for 4x"):
+        Pipeline(volume, tf, scale=4, stretch=3, variant="XS")
+    assert Pipeline(volume, tf, stretch=2, variant="XS").scale == 4, "no scale: the shipped default's, stretched"
+
+
+def test_stretch_auto_picks_by_the_views_pixels_per_voxel_at_each_new_history():
+    """``stretch="auto"`` at 4x: XS 4x where a voxel spans fewer than two output pixels, XS 2x stretched 2x where it
+    spans more (docs/performance.md, "Where the history lives"), chosen when a history starts; at 2x, or for a given
+    model file, there is nothing to choose."""
+    from volsr_core.io import make_phantom
+    from volsr_core.runtime.pipeline import STRETCH_FROM, Pipeline, output_pixels_per_voxel
+    from volsr_core.scene import Volume, get_preset
+
+    volume = Volume.from_record(make_phantom(shape=(40, 40, 40)))
+    tf = get_preset("CT-Phantom")
+    pipeline = Pipeline(volume, tf, scale=4, stretch="auto", variant="XS", size=(64, 64))
+    wide = Camera.framing(volume.bounds)
+    close = wide.zoom(4.0)
+    assert output_pixels_per_voxel(pipeline.caster, wide, 64) < STRETCH_FROM < output_pixels_per_voxel(
+        pipeline.caster, close, 64)
+    assert pipeline.auto_stretch and pipeline.scale == 4
+    pipeline.render(wide)
+    assert (pipeline.stretch, pipeline.engine.path.name, pipeline.slabs) == (1, "volsr-XS-4x.onnx", 2)
+    pipeline.render(close.zoom(1.01))  # the same history, whatever the view: no switch while it lasts
+    assert pipeline.stretch == 1
+    pipeline.reset()
+    image = pipeline.render(close)
+    assert (pipeline.stretch, pipeline.engine.path.name, pipeline.slabs) == (2, "volsr-XS-2x.onnx", 0)
+    assert image.shape == (64, 64, 3) and pipeline.low_resolution_size == (16, 16)
+    assert pipeline.update(size=(32, 32)) == "new size"
+    pipeline.render(close)
+    assert pipeline.stretch == 1, "a smaller view: the same voxel spans half the pixels"
+    assert pipeline.last_reset_reason == "stretch changed"
+    assert not Pipeline(volume, tf, scale=2, stretch="auto", variant="XS").auto_stretch
+    assert not Pipeline(volume, tf, pipeline.engine.path, scale=4, stretch="auto").auto_stretch  # a file: its own
+    with pytest.raises(ValueError, match="'auto' or a whole number"):
+        Pipeline(volume, tf, scale=4, stretch="twice")

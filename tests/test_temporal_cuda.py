@@ -83,15 +83,18 @@ PIPELINE = textwrap.dedent("""
 
     volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
     cameras = orbit(Camera.framing(volume.bounds), 3, degrees=3.0)
-    for scale, size in ((2, (18, 14)), (4, (36, 28))):
-        cpu = Pipeline(volume, get_preset("CT-Phantom"), scale=scale, variant="XS", size=size)
-        gpu = Pipeline(volume, get_preset("CT-Phantom"), scale=scale, variant="XS", size=size, device="cuda")
-        assert gpu.upscaler.on_device and not cpu.upscaler.on_device and gpu.slabs == cpu.slabs == (scale // 2 - 1) * 2
+    for scale, size, stretch in ((2, (18, 14), 1), (4, (36, 28), 1), (4, (36, 28), 2)):
+        cpu = Pipeline(volume, get_preset("CT-Phantom"), scale=scale, variant="XS", size=size, stretch=stretch)
+        gpu = Pipeline(volume, get_preset("CT-Phantom"), scale=scale, variant="XS", size=size, stretch=stretch,
+                       device="cuda")
+        assert gpu.upscaler.on_device and not cpu.upscaler.on_device
+        assert gpu.slabs == cpu.slabs == (scale // stretch // 2 - 1) * 2
         for k, camera in enumerate(cameras):
             a, b = cpu.render(camera), gpu.render(camera)
             assert isinstance(b, np.ndarray) and b.shape == a.shape == (size[1], size[0], 3)
             err = float(np.abs(a - b).max())
-            print(f"XS {scale}x in {gpu.slabs} slabs, frame {k}: max abs difference {err:.2e}")
+            print(f"XS {scale // stretch}x in {gpu.slabs} slabs, stretched {stretch}x, frame {k}: "
+                  f"max abs difference {err:.2e}")
             assert err < 1e-4 and a.std() > 0.01, (err, a.std())
         assert gpu.last_timings["readback_ms"] > 0.0 == cpu.last_timings["readback_ms"]  # timed apart, on the GPU
         lr = gpu.last_low_resolution
@@ -151,9 +154,10 @@ def test_cuda_temporal_kernels_match_the_cpu_kernels():
 
 
 def test_the_xs_pipeline_on_the_device_gives_the_cpu_pipelines_images():
-    """VolSR XS with ``device="cuda"``: frame, TAAU (2x) or layered TAAU (4x) and filter on the device, one image back;
-    the images of the CPU pipeline, frame by frame, and the LR frame there when asked for."""
-    assert run_script(PIPELINE).count("max abs difference") == 2 * 3
+    """VolSR XS with ``device="cuda"``: frame, TAAU (2x) or layered TAAU (4x) and filter on the device (and the
+    stretch of XS 2x + bilinear 2x), one image back; the images of the CPU pipeline, frame by frame, and the LR frame
+    there when asked for."""
+    assert run_script(PIPELINE).count("max abs difference") == 3 * 3
 
 
 def test_every_method_on_a_cuda_caster_makes_the_cpu_images_on_the_device():

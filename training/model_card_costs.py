@@ -26,7 +26,8 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
              "Medians over the measured frames of `volsr bench` (ONNX Runtime, CPU, 2 threads, or for variant XS its "
              "numba filter kernel, on the project's "
              "2-core machine; the LR render is the ray caster's; \"K slabs\": rendered in K depth slabs, the layered "
-             "TAAU before the model). \"vs curve\": PSNR minus that of native "
+             "TAAU before the model; \"+ bilinear Kx\": the model's image stretched by K, a point at K times its "
+             "scale). \"vs curve\": PSNR minus that of native "
              "rendering at reduced size + bilinear at the same total time (positive: the model pays off).", "",
              "| run | volume | LR render ms | TAAU + network ms | total ms | PSNR dB | vs curve dB | native 1 spp |",
              "|---|---|---:|---:|---:|---:|---:|---|"]
@@ -36,16 +37,18 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
         run = f"{settings['size'][0]}², {settings['degrees_per_frame']:g}°/frame"
         for scene in dict.fromkeys(r["scene"] for r in bench["rows"]):
             rows = [r for r in bench["rows"] if r["scene"] == scene]
-            mine = next((r for r in rows if r["method"] == "volsr" and r["model"] == model_file), None)
             native = next((r for r in rows if r["method"] == "native" and r["spp"] == 1), None)
-            if mine is None or native is None:
+            if native is None:
                 continue
             points = bench["targets"][scene]["above_bilinear"]["points"]
-            margin = next(p["margin_db"] for p in points if p["label"] == mine["label"])
-            slabs = mine.get("slabs", 0)  # runs before the slabs were recorded had none
-            lines.append(f"| {run}{f', {slabs} slabs' if slabs else ''} | {mine['volume']} | {mine['ms_render']:.1f} | {mine['ms_network']:.1f} | "
-                         f"{mine['ms_total']:.1f} | {mine['psnr']:.2f} | {margin:+.2f} | "
-                         f"{native['psnr']:.2f} dB in {native['ms_total']:.1f} ms |")
+            for mine in (r for r in rows if r["method"] == "volsr" and r["model"] == model_file):
+                margin = next(p["margin_db"] for p in points if p["label"] == mine["label"])
+                slabs = mine.get("slabs", 0)  # runs before the slabs were recorded had none
+                stretch = mine.get("stretch", 1)  # and none was stretched
+                how = (f", {slabs} slabs" if slabs else "") + (f", + bilinear {stretch}x" if stretch > 1 else "")
+                lines.append(f"| {run}{how} | {mine['volume']} | {mine['ms_render']:.1f} | {mine['ms_network']:.1f} | "
+                             f"{mine['ms_total']:.1f} | {mine['psnr']:.2f} | {margin:+.2f} | "
+                             f"{native['psnr']:.2f} dB in {native['ms_total']:.1f} ms |")
     sources = ", ".join(f"`{p.resolve().relative_to(REPO).as_posix()}`" for p in bench_paths)
     return lines + ["", f"From {sources}."]
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from volsr_core.apps.options import (
     IMAGE_SUFFIXES, MAX_SAMPLES_PER_VOXEL, add_volume_arguments, check_sample_distance, load_volume_argument, number,
-    output_file, output_folder, parse_range, parse_rgb, parse_size, parse_slabs,
+    output_file, output_folder, parse_range, parse_rgb, parse_size, parse_slabs, parse_stretch,
 )
 from volsr_core.errors import WRITE_ERRNOS, InputError, OutputError, VolSRError, require_extra, write_error
 from volsr_core.runtime.models import DEFAULT_SCALE, default_variant
@@ -228,7 +228,16 @@ def cmd_upscale(args: argparse.Namespace) -> int:
         load_transfer_function(args.tf, name=args.tf_name)
     elif args.preset:
         get_preset(args.preset)
-    model, scale, variant = None, args.scale, args.variant
+    # --scale is the whole factor from the rendered frame to --size; the model upscales --scale / --stretch of it
+    model, variant, stretch = None, args.variant, args.stretch
+    if stretch == "auto" and (args.model or args.budget_ms is not None or variant == "auto"):
+        stretch = 1  # a model file upscales by its own scale; the frame budget and --variant auto choose their own
+    k = 1 if stretch == "auto" else stretch  # the stretch the model is checked for ("auto": the unstretched one)
+    if args.scale is not None and args.scale % k:
+        raise InputError("--stretch", f"{k} does not divide --scale {args.scale}")
+    if k > 1 and args.budget_ms is not None:
+        raise InputError("--stretch", "--budget-ms chooses its own levels; give --stretch without it")
+    scale = None if args.scale is None else args.scale // k  # the model's
     if args.model:
         if args.budget_ms is not None:
             raise InputError(args.model, "--budget-ms chooses among the shipped models; give it without --model")
@@ -244,7 +253,8 @@ def cmd_upscale(args: argparse.Namespace) -> int:
         engine = open_engine(model, device=args.device)
         model_scale = engine.config.scale
         if scale is not None and model_scale != scale:
-            raise InputError(model, f"the model upscales {model_scale}x, not {scale}x (--scale)")
+            raise InputError(model, f"the model upscales {model_scale}x, not {scale}x (--scale"
+                             + (f" {args.scale} / --stretch {k})" if k > 1 else ")"))
         if args.slabs and not takes_slabs(engine):
             raise InputError(model, f"takes no depth slabs (--slabs {args.slabs}): only a base-filter model on TAAU "
                              "(variant XS) refines the layered TAAU")
@@ -253,6 +263,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     for part in stale_parts(out / "summary.md"):  # left by a killed run
         part.unlink(missing_ok=True)
     summaries = []
+    chose_stretch = False  # whether a pipeline could choose its stretch by the view (each input's line says which)
     for item in inputs:
         summary = batch.InputSummary(item.name, item.source or "phantom")
         summaries.append(summary)
@@ -272,14 +283,18 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                 pipeline = BudgetRenderer(volume, tf, args.budget_ms, size=args.size, device=args.device,
                                           sample_distance=args.sample_distance, background=args.background)
             else:
-                if model is None:  # --variant auto, decided once at the first input that loads
-                    variant, model = batch.auto_variant(caster, cameras[0], args.size, scale, device=args.device)
-                pipeline = Pipeline(volume, tf, model, scale=scale, size=args.size, variant=variant,
-                                    device=args.device, sample_distance=args.sample_distance,
-                                    background=args.background, slabs=args.slabs)
+                if model is None:  # --variant auto, decided once at the first input that loads, at the model's size
+                    model_size = (-(-args.size[0] // k), -(-args.size[1] // k))
+                    variant, model = batch.auto_variant(caster, cameras[0], model_size, scale, device=args.device)
+                # --stretch auto: the pipeline opens the shipped models it may choose between by itself
+                pipeline = Pipeline(volume, tf, None if stretch == "auto" else model, scale=scale * k,
+                                    size=args.size, variant=variant, device=args.device,
+                                    sample_distance=args.sample_distance, background=args.background,
+                                    slabs=args.slabs, stretch=stretch)
+                chose_stretch = chose_stretch or pipeline.auto_stretch
             batch.upscale_cameras(pipeline, cameras, out / item.name, video=videos.get(item.name), fps=args.fps,
                                   side_by_side_panels=args.side_by_side, reference_spp=args.reference_spp,
-                                  summary=summary, bilinear_scale=scale)
+                                  summary=summary, bilinear_scale=scale * k)
         except OutputError:  # the outputs cannot be written: the other inputs would fail the same way
             raise
         except Exception as err:  # one bad input must not stop the others; Ctrl-C still stops the batch
@@ -287,15 +302,17 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                              else f"{summary.source}: {type(err).__name__}: {' '.join(str(err).split())}")
             print(f"volsr: error: {summary.error}", file=sys.stderr)
     failed = sum(s.error is not None for s in summaries)
-    how = f"within a {args.budget_ms:g} ms frame budget" if args.budget_ms is not None else f"{scale}x"
+    whole = f"{scale * k}x" + (f" ({scale}x + bilinear {k}x)" if k > 1 else "")
+    how = f"within a {args.budget_ms:g} ms frame budget" if args.budget_ms is not None else whole
+    name = "-" if model is None else Path(str(model)).name + (" or stretched by the view (--stretch auto)"
+                                                              if chose_stretch else "")
     print(f"upscaled {len(summaries) - failed} of {len(summaries)} input(s) {how}"
-          + (f" with {Path(str(model)).name}" if model is not None else "") + (f", {failed} failed" if failed else ""))
+          + (f" with {name}" if model is not None else "") + (f", {failed} failed" if failed else ""))
     for s in summaries:
         print("  " + s.line())
     out.mkdir(parents=True, exist_ok=True)
     with atomic_write(out / "summary.md", "w", encoding="utf-8") as fh:
-        fh.write(batch.summary_markdown(summaries, scale, Path(str(model)).name if model is not None else "-",
-                                        budget_ms=args.budget_ms))
+        fh.write(batch.summary_markdown(summaries, whole, name, budget_ms=args.budget_ms))
     print(f"  summary: {out / 'summary.md'}")
     return 1 if failed else 0
 
@@ -368,6 +385,13 @@ def add_upscale_parser(sub) -> None:
                     help="render each frame in K depth slabs, each with its own TAAU history (the layered TAAU, "
                     "docs/temporal.md), for an XS model to refine; 0: the TAAU on the frame's colour [auto: the "
                     "model's own, 2 for XS at 4x and more, else 0]")
+    up.add_argument("--stretch", type=parse_stretch, default="auto", metavar="auto|K",
+                    help="run the model at 1/K of --size and stretch its image bilinearly by K to it: --scale 4 "
+                    "--stretch 2 renders at 1/4 size and runs the 2x model to 1/2 size, as near the curve of "
+                    "rendering fewer pixels as the 4x model or nearer where a voxel spans several output pixels "
+                    "(1024² on the benchmark volumes; docs/performance.md, 'Where the history lives') [auto: 2 at an "
+                    "even --scale of 4 or more where a voxel of the view spans at least two output pixels, chosen per "
+                    "input at its first frame; 1 with --model, --variant auto or --budget-ms]")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                     help="where rays are cast and the network runs; on cuda an XS model's TAAU and filter run there "
                     "too and one image per frame comes back [cpu]")
@@ -398,8 +422,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     results = run.run_benchmark(
         args.volumes, args.size, frames=args.frames, degrees=args.degrees, warmup=args.warmup,
         reference_spp=args.reference_spp, spp=args.native_spp, factors=args.factors, scales=args.scales,
-        variants=[v.strip().upper() for v in args.variants.split(",") if v.strip()], models_dir=args.models_dir,
-        preset=args.preset, placement=args.range, threads=args.threads, device=args.device, vtk=args.vtk)
+        stretches=args.stretch, variants=[v.strip().upper() for v in args.variants.split(",") if v.strip()],
+        models_dir=args.models_dir, preset=args.preset, placement=args.range, threads=args.threads,
+        device=args.device, vtk=args.vtk)
     written = report.write_outputs(results, out)
     for scene, targets in results["targets"].items():
         print(f"{scene}:")
@@ -415,7 +440,8 @@ def add_bench_parser(sub) -> None:
                        description="For each volume, orbit the camera --frames frames of --degrees each and render "
                        "every frame with every method: native full size at each --spp; native at 1/factor size + "
                        "bilinear upscaling for each --factors (VTK's ImageSampleDistance); TAAU at each --scales; "
-                       "VolSR (Pipeline, onnxruntime) for every model of --variants at --scales. PSNR and SSIM "
+                       "VolSR (Pipeline, onnxruntime) for every model of --variants at --scales, and stretched by "
+                       "--stretch to --scales. PSNR and SSIM "
                        "against a --reference-spp supersampled native rendering are averaged over the frames after "
                        "--warmup warm-up frames; ms per frame are medians over the same frames. Also checks the "
                        "targets of docs/performance.md.")
@@ -442,6 +468,9 @@ def add_bench_parser(sub) -> None:
                    help="size reductions for native + bilinear [2,3,4,6,8]")
     b.add_argument("--scales", type=parse_int_list, default=[2, 4, 8], metavar="S,..",
                    help="upscaling factors of TAAU and the VolSR models [2,4,8]")
+    b.add_argument("--stretch", type=parse_int_list, default=[2], metavar="K,..",
+                   help="also every model whose scale times K is one of --scales, its image stretched bilinearly by "
+                   "K (a point at that scale: VolSR XS 2x + bilinear 2x at 4x); 1 for none [2]")
     b.add_argument("--variants", default=",".join(VARIANTS), metavar="V,..",
                    help=f"VolSR model variants [{','.join(VARIANTS)}]")
     b.add_argument("--models-dir", metavar="DIR",

@@ -81,6 +81,21 @@ def parse_rgb(text: str) -> tuple[float, float, float]:
 
 
 MAX_SLABS = 8  # depth slabs a command line may ask for: the render and the history grow with each
+MAX_STRETCH = 8  # the bilinear stretch after the model a command line may ask for
+
+
+def parse_stretch(text: str) -> int | str:
+    """'auto' -> "auto" (chosen by the view: :class:`~volsr_core.runtime.pipeline.Pipeline`); an integer in
+    1..MAX_STRETCH -> itself."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= MAX_STRETCH:
+        raise argparse.ArgumentTypeError(f"must be auto or an integer in [1, {MAX_STRETCH}], got {text!r}")
+    return value
 
 
 def parse_slabs(text: str) -> int | None:

@@ -193,6 +193,7 @@ class InputSummary:
     size: tuple[int, int] = (0, 0)
     low_resolution_size: tuple[int, int] = (0, 0)
     slabs: int = 0  # depth slabs each LR frame was rendered in (the layered TAAU's), 0: none
+    stretch: int = 1  # the bilinear stretch after the model (Pipeline's stretch), 1: none
     timings: dict[str, list[float]] = field(default_factory=lambda: {"render_ms": [], "network_ms": [],
                                                                      "total_ms": [], "readback_ms": []})
     method_ms: dict[str, list[float]] = field(default_factory=dict)  # method -> total ms per frame
@@ -229,6 +230,7 @@ class InputSummary:
         (w, h), (lw, lh) = self.size, self.low_resolution_size
         source = "" if self.levels else f" from {lw}x{lh}"  # frame-budget mode: the levels' sizes vary
         source += f" in {self.slabs} depth slabs" if self.slabs else ""
+        source += f", the model's image stretched {self.stretch}x" if self.stretch > 1 else ""
         text = (f"{self.name}: {self.frames} frames of {w}x{h}{source}; VolSR ms per frame (median): "
                 f"LR render {self.ms('render_ms'):.1f}, network {self.ms('network_ms'):.1f}, "
                 f"total {self.ms('total_ms'):.1f}")
@@ -247,11 +249,11 @@ class InputSummary:
         return text
 
 
-def summary_markdown(summaries: Sequence[InputSummary], scale: int, model: str, budget_ms: float | None = None) -> str:
+def summary_markdown(summaries: Sequence[InputSummary], scale: str, model: str, budget_ms: float | None = None) -> str:
     """OUT/summary.md: per input and method, median ms per frame, its ratio to the native 1-spp render's
     and mean PSNR, so the trade between time and quality reads at a glance; in frame-budget mode
-    (``budget_ms``) also the frames each level made."""
-    title = f"a {budget_ms:g} ms frame budget" if budget_ms is not None else f"{scale}x with {model}"
+    (``budget_ms``) also the frames each level made. ``scale`` as the title says it: "2x", "4x (2x + bilinear 2x)"."""
+    title = f"a {budget_ms:g} ms frame budget" if budget_ms is not None else f"{scale} with {model}"
     lines = [f"# volsr upscale: {title}", "",
              "| input | frames | size | method | ms per frame (median) | time / native 1 spp | PSNR dB (mean) |",
              "|---|---:|---|---|---:|---:|---:|"]
@@ -360,6 +362,8 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
             if mp4 is not None:
                 mp4.append_data(frame)
             summary.frames = i + 1
+            summary.slabs = getattr(pipeline, "slabs", 0)  # the last frame's ("auto" stretch chooses its model)
+            summary.stretch = getattr(pipeline, "stretch", 1)
             bar.update(1)
             if on_frame is not None:
                 on_frame(i)

@@ -260,9 +260,9 @@ class ViewUpscaler:
 
     - ``volume``: our :class:`Volume` of the displayed data; None reads it from ``source``'s output
       (:func:`volume_of`);
-    - ``model``, ``scale``, ``variant``, ``device``, ``threads``, ``sample_distance``, ``slabs``: as
+    - ``model``, ``scale``, ``variant``, ``device``, ``threads``, ``sample_distance``, ``slabs``, ``stretch``: as
       :class:`~volsr_core.runtime.pipeline.Pipeline` takes them (None model: the shipped one; None slabs:
-      the model's own);
+      the model's own; "auto" stretch, the default: by the view);
     - the output size is the view's size, the background the view's background colour.
 
     :meth:`render` returns float32 (H, W, 3) in [0, 1] and keeps ``last_camera``,
@@ -273,13 +273,14 @@ class ViewUpscaler:
 
     def __init__(self, view, display, source=None, volume: Volume | None = None, model: Any = None, *,
                  scale: int | None = None, variant: str | None = None, device: str = "cpu",
-                 threads: int | None = None, sample_distance: float | None = None, slabs: int | None = None):
+                 threads: int | None = None, sample_distance: float | None = None, slabs: int | None = None,
+                 stretch: int | str = "auto"):
         if volume is None and source is None:
             raise ValueError("give the source or the volume")
         self.view, self.display, self.source = view, display, source
         self.volume = volume
         self.options = dict(model=model, scale=scale, variant=variant, device=device, threads=threads,
-                            sample_distance=sample_distance, slabs=slabs)
+                            sample_distance=sample_distance, slabs=slabs, stretch=stretch)
         self.pipeline = None
         self.last_camera: Camera | None = None
         self.last_transfer_function: TransferFunction | None = None

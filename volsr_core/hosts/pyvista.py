@@ -32,8 +32,8 @@ def add_sr_volume(plotter: "pv.Plotter", volume: Any, scalars: str | np.ndarray 
                   specular_power: float | None = None, opacity_unit_distance: float | None = None,
                   scale: int | None = None, model: Any = None, variant: str | None = None, layer: int | None = None,
                   device: str = "cpu", backend: str = "auto", fp16: bool = False, threads: int | None = None,
-                  sample_distance: float | None = None, slabs: int | None = None, enabled: bool = True,
-                  show_scalar_bar: bool = False,
+                  sample_distance: float | None = None, slabs: int | None = None, stretch: int | str = "auto",
+                  enabled: bool = True, show_scalar_bar: bool = False,
                   **add_volume_options: Any) -> VolSRPostProcess:
     """Add ``volume`` to ``plotter`` as ``add_volume`` does and draw it with VolSR; returns the adapter.
 
@@ -47,7 +47,7 @@ def add_sr_volume(plotter: "pv.Plotter", volume: Any, scalars: str | np.ndarray 
       ``opacity_unit_distance``: as ``add_volume`` names them; None keeps the transfer function's
       (or PyVista's default);
     - ``scale``, ``model`` (None: the shipped model of ``variant`` at ``scale``), ``layer``,
-      ``device``, ``backend``, ``fp16``, ``threads``, ``sample_distance``, ``slabs``, ``enabled``: as
+      ``device``, ``backend``, ``fp16``, ``threads``, ``sample_distance``, ``slabs``, ``stretch``, ``enabled``: as
       :class:`VolSRPostProcess` takes them;
     - ``show_scalar_bar`` defaults to False: a bar in ``plotter.renderer`` would lie under the
       SR overlay; other ``add_volume`` keywords (``mapper``, ``name``, ``reset_camera``, ...)
@@ -105,4 +105,4 @@ def add_sr_volume(plotter: "pv.Plotter", volume: Any, scalars: str | np.ndarray 
         ours = None  # other scalars than the Volume's own: read them from the mapper's input
     return VolSRPostProcess(plotter.renderer, actor, ours, model, scale=scale, variant=variant, layer=layer,
                             device=device, backend=backend, fp16=fp16, threads=threads,
-                            sample_distance=sample_distance, slabs=slabs, enabled=enabled)
+                            sample_distance=sample_distance, slabs=slabs, stretch=stretch, enabled=enabled)

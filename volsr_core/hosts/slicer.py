@@ -225,8 +225,11 @@ class SlicerSession:
             return "waiting for the first frame"
         (w, h), (lw, lh) = adapter.pipeline.size, adapter.pipeline.low_resolution_size
         fps = 1000.0 / t["total_ms"] if t["total_ms"] > 0 else float("inf")
+        stretch = adapter.pipeline.stretch  # "auto": 2 where a voxel of the view spans two pixels or more
+        network = (f"{self.variant} {self.scale}x" if stretch == 1
+                   else f"{self.variant} {self.scale // stretch}x + bilinear {stretch}x")
         return (f"{t['total_ms']:.1f} ms/frame ({fps:.1f} fps): ray cast {lw}x{lh} {t['render_ms']:.1f} ms + "
-                f"{self.variant} {self.scale}x network to {w}x{h} {t['network_ms']:.1f} ms")
+                f"{network} network to {w}x{h} {t['network_ms']:.1f} ms")
 
 
 def session_for(renderer, vtk_volume, array_kji: np.ndarray, ijk_to_ras: Any, model: Any = None, *,

@@ -49,10 +49,12 @@ class VolSRPostProcess:
       from the mapper's vtkImageData and the vtkVolume's matrix
       (:func:`~volsr_core.scene.vtk_bridge.volume_from_image`), and rebuilds it when either changes;
     - ``model``, ``scale``, ``variant``, ``device``, ``backend``, ``fp16``, ``threads``,
-      ``sample_distance``, ``slabs``: as :class:`~volsr_core.runtime.pipeline.Pipeline` takes them (None
-      model: the shipped one of ``variant`` at ``scale``, by default VolSR XS 2x, the model that
-      pays off on a CPU; a model file upscales by its own scale; None slabs: the model's own, two
-      depth slabs for XS at 4x and more);
+      ``sample_distance``, ``slabs``, ``stretch``: as :class:`~volsr_core.runtime.pipeline.Pipeline` takes them
+      (None model: the shipped one of ``variant`` at ``scale`` / ``stretch``, by default VolSR XS 2x, the model
+      that pays off on a CPU; a model file upscales by its own scale; None slabs: the model's own, two
+      depth slabs for XS at 4x and more; ``stretch`` 2 at ``scale`` 4: the 2x model to half the viewport, stretched
+      bilinearly; "auto", the default: so where a voxel spans two or more viewport pixels, chosen at each new
+      history);
     - ``layer``: the window layer of the overlay renderer (default: the host renderer's + 1;
       3D Slicer wants 3); the window gets enough layers;
     - ``reset_angle`` (degrees), ``reset_zoom``: a camera that turned further than this between two
@@ -79,8 +81,8 @@ class VolSRPostProcess:
     def __init__(self, renderer, vtk_volume, volume: Volume | None = None, model: Any = None, *,
                  scale: int | None = None, variant: str | None = None, layer: int | None = None, device: str = "cpu",
                  backend: str = "auto", fp16: bool = False, threads: int | None = None,
-                 sample_distance: float | None = None, slabs: int | None = None, reset_angle: float = 30.0,
-                 reset_zoom: float = 2.0, enabled: bool = True, world_matrix: Any = None):
+                 sample_distance: float | None = None, slabs: int | None = None, stretch: int | str = "auto",
+                 reset_angle: float = 30.0, reset_zoom: float = 2.0, enabled: bool = True, world_matrix: Any = None):
         window = renderer.GetRenderWindow()
         if window is None:
             raise ValueError("the renderer is not in a render window yet (add it with window.AddRenderer first)")
@@ -96,7 +98,7 @@ class VolSRPostProcess:
                                  size=self._viewport_size(), variant=variant, device=device, backend=backend,
                                  fp16=fp16, threads=threads, sample_distance=sample_distance,
                                  background=tuple(renderer.GetBackground()), max_turn=reset_angle,
-                                 max_zoom=reset_zoom, slabs=slabs)
+                                 max_zoom=reset_zoom, slabs=slabs, stretch=stretch)
 
         self.image = vtkImageData()
         self.image_actor = vtkImageActor()

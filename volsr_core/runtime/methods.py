@@ -64,14 +64,16 @@ class Method:
     """Base of the comparison methods: ``method(camera)`` -> :class:`MethodFrame`; :meth:`reset` is a cut.
 
     ``kind`` ("native", "bilinear", "bicubic", "taau", "volsr"), ``scale`` (the size reduction; 1 for
-    native), ``spp``, ``slabs`` (the depth slabs rendered: TAAU and VolSR on a layered history), ``variant``
-    and ``model`` (VolSR) describe it; ``label`` names it in reports.
+    native), ``spp``, ``slabs`` (the depth slabs rendered: TAAU and VolSR on a layered history), ``stretch`` (VolSR:
+    the bilinear factor after the model, which upscales ``scale`` / ``stretch``), ``variant`` and ``model`` (VolSR)
+    describe it; ``label`` names it in reports.
     """
 
     kind = ""
     scale = 1
     spp = 1
     slabs = 0
+    stretch = 1
     variant: str | None = None
     model: str | None = None
 
@@ -240,6 +242,7 @@ class VolSR(Method):
     def __init__(self, pipeline: Any, variant: str | None = None, model: str | None = None):
         super().__init__(pipeline.size)
         self.pipeline, self.scale = pipeline, int(pipeline.scale)
+        self.stretch = int(getattr(pipeline, "stretch", 1))  # a frame-budget renderer has none of its own
         self.variant, self.model = variant, model
 
     @property
@@ -250,7 +253,11 @@ class VolSR(Method):
 
     @property
     def label(self) -> str:
-        return f"VolSR {self.variant} {self.scale}x" + (f" in {self.slabs} slabs" if self.slabs else "")
+        """'VolSR XS 4x in 2 slabs'; a stretched pipeline names its model's scale and the stretch: 'VolSR XS 2x +
+        bilinear 2x' is a 4x point."""
+        slabs = f" in {self.slabs} slabs" if self.slabs else ""
+        stretch = f" + bilinear {self.stretch}x" if self.stretch > 1 else ""
+        return f"VolSR {self.variant} {self.scale // self.stretch}x{slabs}{stretch}"
 
     def reset(self) -> None:
         self.pipeline.reset()

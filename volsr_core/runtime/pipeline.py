@@ -22,6 +22,9 @@ from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
+from volsr_core.temporal.resample import resize_bilinear
+
+STRETCH_FROM = 2.0  # stretch "auto": by 2 where a voxel spans at least this many output pixels (docs/performance.md)
 
 
 class KeepsLastFrame:
@@ -37,12 +40,20 @@ class KeepsLastFrame:
 
 
 class Pipeline(KeepsLastFrame):
-    """Renders ``volume`` at 1/``scale`` of ``size`` and upscales it with ``model``.
+    """Renders ``volume`` at 1/``scale`` of ``size`` and upscales it with ``model`` (and a bilinear ``stretch``).
 
     - ``model``: an .onnx or .pt file, an ``nn.Module``, or None for the shipped model of
-      ``variant`` at ``scale`` (resources/models, SHA-256 checked);
-    - ``scale``: the upscaling factor; None: the model's own, or for a shipped model
-      :data:`~volsr_core.runtime.models.DEFAULT_SCALE` (2); a model of another scale is an error;
+      ``variant`` at ``scale`` / ``stretch`` (resources/models, SHA-256 checked);
+    - ``scale``: the upscaling factor from the rendered frame to ``size``; None: the model's own times
+      ``stretch``, or for a shipped model :data:`~volsr_core.runtime.models.DEFAULT_SCALE` (2) times ``stretch``;
+      a model of a scale other than ``scale`` / ``stretch`` is an error;
+    - ``stretch``: 1 (the default), or k > 1: the model makes 1/k of ``size`` and its image is stretched bilinearly
+      by k to ``size`` (the same view, as VTK stretches a reduced rendering), so that its history and filter work on
+      k² times fewer pixels: where a voxel spans several output pixels, detail the frames' samples do not hold
+      anyway (docs/performance.md, "Where the history lives"); "auto": at an even ``scale`` of 4 or more with a
+      shipped model (``model`` None) at half of it, 2 where the view's voxels span at least :data:`STRETCH_FROM`
+      output pixels (:func:`output_pixels_per_voxel`), else 1, chosen at each new history (the first frame, a
+      :meth:`reset` or :meth:`update` that changed something), both models opened up front; otherwise 1;
     - ``variant``: None: :func:`~volsr_core.runtime.models.default_variant`, the fastest shipped at
       ``scale`` (XS at 2x: the model that pays off on a CPU, docs/performance.md);
     - ``size``: output (width, height) in pixels; any size: the LR frame is ceil(size / scale)
@@ -58,9 +69,9 @@ class Pipeline(KeepsLastFrame):
       (:func:`~volsr_core.runtime.upscaler.default_slabs`: two for XS at 4x and more, else 0).
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
-    rendering and upscaling that frame (``render_ms``, ``network_ms``, ``total_ms``: on the GPU until its work
-    is done) and copying the image from the GPU (``readback_ms``, 0 on the host), ``last_frame`` the LR frame
-    as rendered and ``last_low_resolution`` the same in host memory. :meth:`update` follows a changed volume,
+    rendering and upscaling that frame (``render_ms``, ``network_ms`` with the stretch, ``total_ms``: on the GPU
+    until its work is done) and copying the image from the GPU (``readback_ms``, 0 on the host), ``last_frame`` the LR
+    frame as rendered and ``last_low_resolution`` the same in host memory. :meth:`update` follows a changed volume,
     transfer function, background or size; :meth:`reset` drops the history for the caller's own reasons (the upscaler
     also drops it by itself on camera jumps, implausible motion and a new size). ``resets`` counts
     the drops, ``last_reset_reason`` says why the last one happened.
@@ -71,28 +82,40 @@ class Pipeline(KeepsLastFrame):
                  device: str = "cpu",
                  backend: str = "auto", fp16: bool = False, threads: int | None = None,
                  sample_distance: float | None = None, background: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 max_turn: float = 30.0, max_zoom: float = 2.0, slabs: int | None = None):
-        if model is None:
-            from volsr_core.runtime.models import DEFAULT_SCALE, default_variant, model_file
-
-            scale = DEFAULT_SCALE if scale is None else scale
-            model = model_file(variant or default_variant(scale), scale, "onnx" if backend != "torch" else "pt")
-        self.engine = open_engine(model, backend=backend, device=device, fp16=fp16, threads=threads)
-        if scale is not None and self.engine.config.scale != scale:
-            raise ValueError(f"the model upscales {self.engine.config.scale}x, not {scale}x")
-        self.scale = int(self.engine.config.scale)
+                 max_turn: float = 30.0, max_zoom: float = 2.0, slabs: int | None = None, stretch: int | str = 1):
         # ray starts jittered per pixel and frame (seeded by the frame number): the temporal history averages
         # the offsets instead of keeping a fixed start's rings
         self._caster_options = {"sample_distance": sample_distance, "device": device, "start_jitter": "ign"}
         self.caster = RayCaster(volume, transfer_function, background=tuple(float(c) for c in background),
                                 **self._caster_options)
-        self.upscaler = StatefulUpscaler(self.engine, max_turn=max_turn, max_zoom=max_zoom, slabs=slabs, device=device)
-        self.slabs = self.upscaler.slabs
+        # one model and upscaler per stretch it may run: "auto" holds the unstretched and the stretched one
+        self._paths: dict[int, tuple[Any, StatefulUpscaler]] = {}
+        for k in _stretches(stretch, scale, model, variant):
+            engine = _open_model(model, scale, k, variant, backend=backend, device=device, fp16=fp16, threads=threads)
+            self._paths[k] = (engine, StatefulUpscaler(engine, max_turn=max_turn, max_zoom=max_zoom, slabs=slabs,
+                                                       device=device))
+        self.auto_stretch = len(self._paths) > 1
+        self._use(min(self._paths))
         self.size = (int(size[0]), int(size[1]))
         self._tf_key = _tf_key(transfer_function)
         self.frame = 0
         self.previous_camera: Camera | None = None
         self.last_timings: dict[str, float] = {}
+
+    def _use(self, stretch: int) -> None:
+        """Run the model and upscaler of ``stretch`` from the next frame (its history starts afresh)."""
+        self.engine, self.upscaler = self._paths[stretch]
+        if getattr(self, "stretch", stretch) != stretch:  # back to a history last used for other frames
+            self.upscaler.reset("stretch changed")
+        self.stretch = stretch
+        self.model_scale = int(self.engine.config.scale)
+        self.scale = self.model_scale * stretch
+        self.slabs = self.upscaler.slabs
+        self._stretch = resize_bilinear  # the model's image to the full size, where the upscaler leaves it
+        if self.upscaler.on_device:
+            from volsr_core.temporal.frames_cuda import resize_bilinear_device
+
+            self._stretch = resize_bilinear_device
 
     @property
     def low_resolution_size(self) -> tuple[int, int]:
@@ -143,13 +166,17 @@ class Pipeline(KeepsLastFrame):
 
     def render(self, camera: Camera) -> np.ndarray:
         """The upscaled image for ``camera``: float32 (H, W, 3) in [0, 1], H, W = ``size``."""
+        if self.auto_stretch and self.previous_camera is None:  # a new history: its stretch by this view
+            self._use(2 if output_pixels_per_voxel(self.caster, camera, self.size[1]) >= STRETCH_FROM else 1)
         w, h = self.low_resolution_size
-        jitter = halton_jitter(self.frame, jitter_phases(self.scale))
+        jitter = halton_jitter(self.frame, jitter_phases(self.model_scale))
         started = time.perf_counter()
         lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame,
                                 slabs=self.slabs, on_device=self.upscaler.on_device)
         rendered = time.perf_counter()
         image = self.upscaler.upscale(lr, self.caster.background)
+        if self.stretch > 1:
+            image = self._stretch(image, w * self.scale, h * self.scale)
         done = ready_at(image)
         image, readback_ms = to_host(image)
         self.last_timings = {"render_ms": 1000 * (rendered - started), "network_ms": 1000 * (done - rendered),
@@ -158,6 +185,47 @@ class Pipeline(KeepsLastFrame):
         self.previous_camera = camera
         self.frame += 1
         return image[: self.size[1], : self.size[0]]
+
+
+def output_pixels_per_voxel(caster: RayCaster, camera: Camera, height: int) -> float:
+    """How many output pixels (of an image ``height`` pixels tall) the volume's smallest voxel spacing spans at the
+    focal point of ``camera``: what a frame at that size can show of the volume's detail."""
+    return float(min(caster.volume.spacing)) / camera.pixel_size_at_focus(height)
+
+
+def _stretches(stretch: int | str, scale: int | None, model: Any, variant: str | None) -> tuple[int, ...]:
+    """The stretches a pipeline may run: ``stretch`` itself, or for "auto" 1 and, where ``scale`` is even and 4 or
+    more and a shipped model of the variant upscales half of it, 2."""
+    if stretch == "auto":
+        if model is not None or scale is None or scale < 4 or scale % 2:
+            return (1,)
+        from volsr_core.runtime.models import default_variant, shipped_models
+
+        half = scale // 2
+        wanted = (variant or default_variant(half)).upper()
+        return (1, 2) if any(e["variant"] == wanted and e["scale"] == half for e in shipped_models()) else (1,)
+    if not isinstance(stretch, int) or stretch < 1 or (scale is not None and scale % stretch):
+        raise ValueError(f"the stretch must be 'auto' or a whole number >= 1 that divides the scale, got {stretch!r}"
+                         + ("" if scale is None else f" for {scale}x"))
+    return (stretch,)
+
+
+def _open_model(model: Any, scale: int | None, stretch: int, variant: str | None, **options: Any):
+    """The engine for ``model`` (None: the shipped one of ``variant`` at ``scale`` / ``stretch``, or at
+    :data:`~volsr_core.runtime.models.DEFAULT_SCALE`); a model of another scale than ``scale`` / ``stretch`` is an
+    error."""
+    model_scale = None if scale is None else scale // stretch
+    if model is None:
+        from volsr_core.runtime.models import DEFAULT_SCALE, default_variant, model_file
+
+        model_scale = DEFAULT_SCALE if model_scale is None else model_scale
+        model = model_file(variant or default_variant(model_scale), model_scale,
+                           "onnx" if options["backend"] != "torch" else "pt")
+    engine = open_engine(model, **options)
+    if model_scale is not None and engine.config.scale != model_scale:
+        raise ValueError(f"the model upscales {engine.config.scale}x, not {model_scale}x"
+                         + (f" ({scale}x stretched {stretch}x)" if stretch > 1 else ""))
+    return engine
 
 
 def _tf_key(tf: TransferFunction) -> str:

@@ -130,7 +130,8 @@ def target_lines(targets: dict[str, Any]) -> list[str]:
 
 
 def _sorted_rows(rows: Sequence[dict]) -> list[dict]:
-    return sorted(rows, key=lambda r: (METHOD_ORDER.index(r["method"]), r["scale"], r["spp"], str(r["variant"])))
+    return sorted(rows, key=lambda r: (METHOD_ORDER.index(r["method"]), r["scale"], r["spp"], str(r["variant"]),
+                                       r.get("stretch", 1)))
 
 
 def _ms(v: float | None) -> str:
@@ -155,6 +156,10 @@ def markdown_report(results: dict[str, Any]) -> str:
              "and the network for VolSR, the upscaling for bilinear and TAAU); total is the median of the per-frame "
              "sums, so it need not equal the two medians added. Time and ΔPSNR are relative to native full-size "
              "1-spp rendering.", ""]
+    if any(r.get("stretch", 1) > 1 for r in results["rows"]):
+        lines += ["\"VolSR ... + bilinear Kx\": the model's image at 1/K of the size, stretched bilinearly to it "
+                  "(`Pipeline(..., stretch=K)`): a point at K times the model's scale, rendered at the size of the "
+                  "others at that scale; the stretch is in its network ms.", ""]
     readback = [r["ms_readback"] for r in results["rows"] if r.get("ms_readback")]
     if readback:
         lines += [f"On the GPU every method makes its full-size image there (the bilinear stretch too, as VTK's) and "
@@ -207,14 +212,17 @@ def plot(results: dict[str, Any], path: str | os.PathLike) -> Path:
                     label="native + bilinear curve")
         seen = set()
         for r in mine:
-            marker, colour = styles.get(r["method"], ("*", volsr_colours.get(r["variant"], "C6")))
-            name = {"native": "native", "bilinear": "native reduced + bilinear", "taau": "TAAU",
-                    "vtk": r["label"]}.get(r["method"], f"VolSR {r['variant']}")
+            stretch = r.get("stretch", 1)  # a VolSR model's image stretched bilinearly (runs before it: none)
+            volsr_style = ("P" if stretch > 1 else "*", volsr_colours.get(r["variant"], "C6"))
+            marker, colour = styles.get(r["method"], volsr_style)
+            name = {"native": "native", "bilinear": "native reduced + bilinear", "taau": "TAAU", "vtk": r["label"]}.get(
+                r["method"], f"VolSR {r['variant']}" + (" + bilinear" if stretch > 1 else ""))
             ax.plot(r["ms_total"], r["psnr"], marker, color=colour, ms=9 if r["method"] == "volsr" else 6,
                     label=None if name in seen else name)
             seen.add(name)
             short = {"native": f"{r['spp']} spp", "bilinear": f"1/{r['scale']}", "taau": f"{r['scale']}x",
-                     "vtk": "VTK"}.get(r["method"], f"{r['variant']} {r['scale']}x")
+                     "vtk": "VTK"}.get(r["method"], f"{r['variant']} {r['scale'] // stretch}x"
+                                       + (f" + {stretch}x" if stretch > 1 else ""))
             ax.annotate(short, (r["ms_total"], r["psnr"]), textcoords="offset points", xytext=(4, 3), fontsize=7)
         front = [mine[i] for i in pareto_front([r["ms_total"] for r in mine], [r["psnr"] for r in mine])]
         if front:

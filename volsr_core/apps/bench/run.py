@@ -7,7 +7,9 @@ run, interleaved frame by frame (the order rotating per frame, so machine noise 
 - ``native``: full size, ``spp`` jittered samples per pixel (1 = the pixel centres);
 - ``bilinear``: full size / ``factor`` (VTK's ImageSampleDistance), bilinearly upscaled;
 - ``taau``: full size / ``scale``, Halton-jittered, motion vectors, TAAU;
-- ``volsr``: :class:`~volsr_core.runtime.pipeline.Pipeline` for every model (variant, scale);
+- ``volsr``: :class:`~volsr_core.runtime.pipeline.Pipeline` for every model (variant, scale), and for each
+  ``stretches`` k > 1 every model whose scale times k is one of ``scales``, its image stretched bilinearly by k
+  (``Pipeline(..., stretch=k)``: a point at that scale, "VolSR XS 2x + bilinear 2x" at 4x);
 
 all of them :mod:`volsr_core.runtime.methods`.
 
@@ -49,6 +51,7 @@ from volsr_core.sr.network_config import VARIANTS
 SPP = (1, 2, 4)
 FACTORS = (2, 3, 4, 6, 8)
 SCALES = (2, 4, 8)
+STRETCHES = (2,)
 
 
 # -- models ---------------------------------------------------------------------------------------
@@ -116,20 +119,35 @@ def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[
                                         str(m.path)))
 
 
+def model_scales(scales: Sequence[int], stretches: Sequence[int] = STRETCHES) -> list[int]:
+    """The model scales the VolSR rows need: ``scales``, and each divided by each of ``stretches`` where it divides
+    into a scale of 2 or more."""
+    return sorted({s // k for s in scales for k in (1, *stretches) if s % k == 0 and s // k >= 2})
+
+
+def volsr_rows(models: Sequence[ModelSpec], scales: Sequence[int],
+               stretches: Sequence[int] = STRETCHES) -> list[tuple[ModelSpec, int]]:
+    """(model, stretch) of every VolSR row: each model at a scale of ``scales`` as it is (stretch 1), and each whose
+    scale times a k > 1 of ``stretches`` is one of ``scales``, stretched by k (a point at that scale)."""
+    return [(spec, k) for spec in models for k in dict.fromkeys((1, *stretches)) if spec.scale * k in scales]
+
+
 def build_methods(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int], spp: Sequence[int] = SPP,
-                  factors: Sequence[int] = FACTORS, scales: Sequence[int] = SCALES, models: Sequence[ModelSpec] = (),
-                  threads: int | None = 2, device: str = "cpu", vtk: str | None = None) -> list[Method]:
+                  factors: Sequence[int] = FACTORS, scales: Sequence[int] = SCALES,
+                  models: Sequence[tuple[ModelSpec, int]] = (), threads: int | None = 2, device: str = "cpu",
+                  vtk: str | None = None) -> list[Method]:
     """Fresh methods (with their state: TAAU histories, VolSR pipelines) for one volume; native, bilinear
-    and TAAU share ``caster``; ``vtk`` ("gpu", "fixed_point") adds VTK's own mapper at full size."""
+    and TAAU share ``caster``; ``models`` are (model, stretch) pairs (:func:`volsr_rows`); ``vtk`` ("gpu",
+    "fixed_point") adds VTK's own mapper at full size."""
     methods: list[Method] = [Native(caster, size, int(n)) for n in spp]
     methods += [ReducedSize(caster, size, int(f), "bilinear") for f in factors]
     methods += [Taau(caster, size, int(s)) for s in scales]
     if models:
         from volsr_core.runtime.pipeline import Pipeline
 
-        for spec in models:
-            pipeline = Pipeline(bench_volume.volume, bench_volume.transfer_function, spec.path, scale=spec.scale,
-                                size=size, device=device, threads=threads)
+        for spec, stretch in models:
+            pipeline = Pipeline(bench_volume.volume, bench_volume.transfer_function, spec.path,
+                                scale=spec.scale * stretch, size=size, device=device, threads=threads, stretch=stretch)
             methods.append(VolSR(pipeline, spec.variant, spec.path.name))
     if vtk is not None:
         from volsr_core.hosts.vtk_reference import VtkMethod
@@ -206,7 +224,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
             "scene": bench_volume.label, "volume": bench_volume.name, "preset": bench_volume.preset,
             "range": [float(v) for v in bench_volume.transfer_function.value_range],
             "method": method.kind, "label": method.label, "scale": method.scale, "spp": method.spp,
-            "slabs": method.slabs, "variant": method.variant, "model": method.model,
+            "slabs": method.slabs, "stretch": method.stretch, "variant": method.variant, "model": method.model,
             "ms_render": _finite(statistics.median(rec["render"])),
             "ms_network": _finite(statistics.median(rec["network"])),
             "ms_total": _finite(statistics.median(total)),
@@ -226,13 +244,15 @@ def _finite(value: float) -> float | None:
 def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, int] = (512, 512), *,
                   frames: int = 12, degrees: float = 2.0, warmup: int = 4, reference_spp: int = 16,
                   spp: Sequence[int] = SPP, factors: Sequence[int] = FACTORS, scales: Sequence[int] = SCALES,
-                  variants: Sequence[str] = VARIANTS, models_dir: str | os.PathLike | None = None,
+                  stretches: Sequence[int] = STRETCHES, variants: Sequence[str] = VARIANTS,
+                  models_dir: str | os.PathLike | None = None,
                   preset: str | None = None, placement: str | tuple[float, float] = "auto", threads: int | None = 2,
                   device: str = "cpu", progress: bool = True, vtk: str | None = None) -> dict[str, Any]:
     """Benchmark every volume (specs, :func:`~volsr_core.apps.bench.scenes.parse_volume_spec`; none: the phantom).
 
     Returns ``{"settings", "machine", "models", "rows", "targets"}`` (what bench.json holds).
-    ``scales`` are TAAU's and the VolSR models' (``variants`` filters the models).
+    ``scales`` are TAAU's and the VolSR models' (``variants`` filters the models); ``stretches`` add the stretched
+    VolSR rows (:func:`volsr_rows`; (1,) or () for none).
     """
     from tqdm import tqdm
 
@@ -244,21 +264,25 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
     size = (int(size[0]), int(size[1]))
     _check_settings(size, frames, warmup, spp, factors, scales, reference_spp)
     specs = list(volumes) if volumes else [None]
-    models = find_models(models_dir, variants, scales)
+    models = find_models(models_dir, variants, model_scales(scales, stretches))
+    rows_of_models = volsr_rows(models, scales, stretches)
+    models = list(dict.fromkeys(spec for spec, _ in rows_of_models))  # those a row runs
     volumes_ = [load_bench_volume(spec, preset, placement) for spec in specs]
-    n_methods = len(spp) + len(factors) + len(scales) + len(models) + (vtk is not None)
+    n_methods = len(spp) + len(factors) + len(scales) + len(rows_of_models) + (vtk is not None)
     rows: list[dict[str, Any]] = []
     with tqdm(total=len(volumes_) * frames * (1 + n_methods), desc="bench", unit="render", disable=not progress) as bar:
         for bench_volume in volumes_:
             bar.set_postfix_str(bench_volume.name)
             caster = RayCaster(bench_volume.volume, bench_volume.transfer_function, device=device, start_jitter="ign")
-            methods = build_methods(bench_volume, caster, size, spp, factors, scales, models, threads, device, vtk)
+            methods = build_methods(bench_volume, caster, size, spp, factors, scales, rows_of_models, threads, device,
+                                    vtk)
             cameras = orbit_around(caster.visible_bounds(), frames, degrees, aspect=size[0] / size[1])
             rows += bench_one(bench_volume, caster, size, methods, cameras, reference_spp, warmup, bar)
 
     settings = {"size": list(size), "frames": frames, "degrees_per_frame": degrees, "warmup": warmup,
                 "measured_frames": frames - warmup, "reference_spp": reference_spp, "spp": list(spp),
-                "factors": list(factors), "scales": list(scales), "variants": [v.upper() for v in variants],
+                "factors": list(factors), "scales": list(scales), "stretches": list(stretches),
+                "variants": [v.upper() for v in variants],
                 "models_dir": None if models_dir is None else str(models_dir), "onnxruntime_threads": threads,
                 "numba_threads": numba.get_num_threads(), "device": device, "vtk": vtk}
     machine = {"python": platform.python_version(), "platform": platform.platform(),
