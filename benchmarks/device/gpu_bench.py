@@ -73,8 +73,10 @@ def bench(out: Path, runs: list[tuple[int, float]], names: list[str], device: st
     for size, degrees in runs:
         rows, start = [], time.time()
         for name in names:
+            # no stretched rows (stretches=(1,)): on a GPU the step after the render that a stretch saves costs
+            # little, and five rows more per volume would not fit the lease's minutes (docs/performance-gpu.md)
             results = run.run_benchmark([SCENES[name]], (size, size), degrees=degrees, device=device,
-                                        models_dir="shipped .pt")
+                                        models_dir="shipped .pt", stretches=(1,))
             rows += results["rows"]
             results["rows"], results["targets"] = rows, run.check_targets(rows)
             results["settings"]["wall_s"] = round(time.time() - start, 1)

@@ -15,7 +15,7 @@ VOLSR_TEST_REAL_CUDA=1 timeout 200 python3 -c "import sys, types; sys.modules['S
 sys.path.insert(0, 'tests'); import test_render_cuda as t; exec(t.SCRIPT.format(tests='tests'))" 2>&1 | tee $OUT/cuda_check.log
 VOLSR_TEST_REAL_CUDA=1 timeout 200 python3 -c "import sys, types; sys.modules['SimpleITK'] = types.ModuleType('SimpleITK')
 sys.path.insert(0, 'tests'); import test_temporal_cuda as t; exec(t.SCRIPT); exec(t.PIPELINE); exec(t.METHODS)" 2>&1 \
-    | tail -12 | tee $OUT/temporal_cuda_check.log
+    | tail -60 | tee $OUT/temporal_cuda_check.log
 timeout ${PROBE_S:-150} python3 benchmarks/device/gpu_probe.py $OUT/probe --volumes .gpu/volumes 2>&1 | tee $OUT/probe.log
 [ -z "${RUNS-512/2,1024/2}" ] || timeout ${BENCH_S:-320} python3 benchmarks/device/gpu_bench.py run $OUT \
     ${RUNS-512/2,1024/2} --volumes .gpu/volumes 2>&1 | tee $OUT/bench.log | grep -v "bench:"
