@@ -247,7 +247,7 @@ def test_at_4x_a_view_whose_voxels_span_pixels_draws_the_2x_model_at_half_the_vi
     shipped XS 2x on the 1/4-size frame to half the viewport, stretched to it: the frame a Pipeline with ``stretch=2``
     makes; ``stretch=1`` keeps XS 4x."""
     from volsr_core.hosts.vtk_adapter import VolSRPostProcess
-    from volsr_core.runtime.pipeline import STRETCH_FROM, output_pixels_per_voxel
+    from volsr_core.runtime.pipeline import STRETCH_FROM
     from volsr_core.scene.vtk_bridge import apply_camera
 
     volume, tf = ct_avm
@@ -258,7 +258,7 @@ def test_at_4x_a_view_whose_voxels_span_pixels_draws_the_2x_model_at_half_the_vi
         adapter = VolSRPostProcess(host.renderer, host.actor, volume, scale=4, stretch=stretch)
         host.window.Render()
         assert adapter.frames == 1 and adapter.last_error == "" and adapter.last_image.shape == (H, W, 3)
-        assert output_pixels_per_voxel(adapter.pipeline.caster, adapter.last_camera, H) >= STRETCH_FROM
+        assert adapter.pipeline.caster.pixels_per_voxel(adapter.last_camera, H) >= STRETCH_FROM
         assert adapter.pipeline.engine.path.name == model and adapter.pipeline.low_resolution_size == (W // 4, H // 4)
         if stretch == "auto":
             expected = Pipeline(volume, tf, scale=4, stretch=2, size=(W, H)).render(adapter.last_camera)

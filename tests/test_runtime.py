@@ -302,7 +302,7 @@ def test_stretch_auto_picks_by_the_views_pixels_per_voxel_at_each_new_history():
     spans more (docs/performance.md, "Where the history lives"), chosen when a history starts; at 2x, or for a given
     model file, there is nothing to choose."""
     from volsr_core.io import make_phantom
-    from volsr_core.runtime.pipeline import STRETCH_FROM, Pipeline, output_pixels_per_voxel
+    from volsr_core.runtime.pipeline import STRETCH_FROM, Pipeline
     from volsr_core.scene import Volume, get_preset
 
     volume = Volume.from_record(make_phantom(shape=(40, 40, 40)))
@@ -310,8 +310,7 @@ def test_stretch_auto_picks_by_the_views_pixels_per_voxel_at_each_new_history():
     pipeline = Pipeline(volume, tf, scale=4, stretch="auto", variant="XS", size=(64, 64))
     wide = Camera.framing(volume.bounds)
     close = wide.zoom(4.0)
-    assert output_pixels_per_voxel(pipeline.caster, wide, 64) < STRETCH_FROM < output_pixels_per_voxel(
-        pipeline.caster, close, 64)
+    assert pipeline.caster.pixels_per_voxel(wide, 64) < STRETCH_FROM < pipeline.caster.pixels_per_voxel(close, 64)
     assert pipeline.auto_stretch and pipeline.scale == 4
     pipeline.render(wide)
     assert (pipeline.stretch, pipeline.engine.path.name, pipeline.slabs) == (1, "volsr-XS-4x.onnx", 2)

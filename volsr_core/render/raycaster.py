@@ -223,9 +223,13 @@ class RayCaster:
         if on_device or out is None or out.shape != (height, width, L.OUT_CHANNELS) or out.dtype != np.float32:
             out = self._new_buffer((height, width, L.OUT_CHANNELS), on_device)
         slab_out = self._cast(camera, width, height, jitter, previous_camera, seed, out, int(slabs))
-        voxel = float(min(self.volume.spacing))
-        return FeatureFrame(out, camera, jitter, previous_camera, voxel / camera.pixel_size_at_focus(height),
+        return FeatureFrame(out, camera, jitter, previous_camera, self.pixels_per_voxel(camera, height),
                             slab_out if slabs else None)
+
+    def pixels_per_voxel(self, camera: Camera, height: int) -> float:
+        """How many pixels of an image ``height`` pixels tall the volume's smallest voxel spacing spans at the focal
+        point of ``camera``: how finely a frame of that size samples the volume's detail."""
+        return float(min(self.volume.spacing)) / camera.pixel_size_at_focus(height)
 
     def _cast(self, camera: Camera, width: int, height: int, jitter: tuple[float, float],
               previous_camera: Camera | None, seed: int, out: np.ndarray, slabs: int) -> np.ndarray:

@@ -52,7 +52,7 @@ class Pipeline(KeepsLastFrame):
       k² times fewer pixels: where a voxel spans several output pixels, detail the frames' samples do not hold
       anyway (docs/performance.md, "Where the history lives"); "auto": at an even ``scale`` of 4 or more with a
       shipped model (``model`` None) at half of it, 2 where the view's voxels span at least :data:`STRETCH_FROM`
-      output pixels (:func:`output_pixels_per_voxel`), else 1, chosen at each new history (the first frame, a
+      output pixels (``RayCaster.pixels_per_voxel`` at ``size``), else 1, chosen at each new history (the first frame, a
       :meth:`reset` or :meth:`update` that changed something), both models opened up front; otherwise 1;
     - ``variant``: None: :func:`~volsr_core.runtime.models.default_variant`, the fastest shipped at
       ``scale`` (XS at 2x: the model that pays off on a CPU, docs/performance.md);
@@ -167,7 +167,7 @@ class Pipeline(KeepsLastFrame):
     def render(self, camera: Camera) -> np.ndarray:
         """The upscaled image for ``camera``: float32 (H, W, 3) in [0, 1], H, W = ``size``."""
         if self.auto_stretch and self.previous_camera is None:  # a new history: its stretch by this view
-            self._use(2 if output_pixels_per_voxel(self.caster, camera, self.size[1]) >= STRETCH_FROM else 1)
+            self._use(2 if self.caster.pixels_per_voxel(camera, self.size[1]) >= STRETCH_FROM else 1)
         w, h = self.low_resolution_size
         jitter = halton_jitter(self.frame, jitter_phases(self.model_scale))
         started = time.perf_counter()
@@ -185,12 +185,6 @@ class Pipeline(KeepsLastFrame):
         self.previous_camera = camera
         self.frame += 1
         return image[: self.size[1], : self.size[0]]
-
-
-def output_pixels_per_voxel(caster: RayCaster, camera: Camera, height: int) -> float:
-    """How many output pixels (of an image ``height`` pixels tall) the volume's smallest voxel spacing spans at the
-    focal point of ``camera``: what a frame at that size can show of the volume's detail."""
-    return float(min(caster.volume.spacing)) / camera.pixel_size_at_focus(height)
 
 
 def _stretches(stretch: int | str, scale: int | None, model: Any, variant: str | None) -> tuple[int, ...]:
