@@ -43,7 +43,7 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
     _, results = bench_run
     rows = by_label(results)
     expected = ({f"native {n} spp" for n in SPP} | {f"native 1/{f} size + bilinear" for f in FACTORS}
-                | {f"TAAU {s}x" for s in SCALES} | {"VolSR S 4x", "VolSR S 4x + bilinear 2x"})
+                | {f"TAAU {s}x" for s in SCALES} | {"VolSR S 4x", "VolSR S 4x + bicubic 2x"})
     assert set(rows) == expected
     assert {r["scene"] for r in rows.values()} == {"phantom, CT-Phantom on -1024..3071 (auto)"}
     for r in rows.values():
@@ -54,7 +54,7 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
         assert (r["ms_network"] == 0) == (r["method"] == "native")
     volsr = rows["VolSR S 4x"]  # scale and variant came from the ONNX metadata
     assert (volsr["method"], volsr["variant"], volsr["scale"], volsr["model"]) == ("volsr", "S", 4, "s4.onnx")
-    stretched = rows["VolSR S 4x + bilinear 2x"]  # --stretch 2 by default: the 4x model's image stretched, an 8x point
+    stretched = rows["VolSR S 4x + bicubic 2x"]  # --stretch 2 by default: the 4x model's image stretched, an 8x point
     assert (stretched["scale"], stretched["stretch"], stretched["model"], volsr["stretch"]) == (8, 2, "s4.onnx", 1)
     assert results["settings"]["stretches"] == [2]
     assert results["settings"]["onnxruntime_threads"] == 2 and results["settings"]["measured_frames"] == 3
@@ -74,7 +74,7 @@ def test_reports_and_target_verdicts(bench_run):
     md = (out / "bench.md").read_text()
     assert "## phantom, CT-Phantom" in md and "| VolSR S 4x |" in md and "| native 1 spp |" in md
     assert "after 1 warm-up frames" in md and "8-spp" in md
-    assert "| VolSR S 4x + bilinear 2x |" in md and "the model's image at 1/K of the size, stretched" in md
+    assert "| VolSR S 4x + bicubic 2x |" in md and "the model's image at 1/K of the size, stretched" in md
     assert "1. VolSR at 4x reaches at least native 1-spp PSNR" in md and "2. Every VolSR point lies at least" in md
     from PIL import Image
 

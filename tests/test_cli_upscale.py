@@ -166,8 +166,8 @@ def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
     assert main(["upscale", "--orbit", "2", "--size", "32", "--scale", "4", "--stretch", "2",
                  "--out", str(tmp_path / "e")]) == 0  # the 2x model to 16x16, stretched
     out = capsys.readouterr().out
-    assert "4x (2x + bilinear 2x) with volsr-XS-2x.onnx" in out and "from 8x8, the model's image stretched 2x;" in out
-    assert "# volsr upscale: 4x (2x + bilinear 2x) with volsr-XS-2x.onnx" in (tmp_path / "e/summary.md").read_text()
+    assert "4x (2x + bicubic 2x) with volsr-XS-2x.onnx" in out and "from 8x8, the model's image stretched 2x;" in out
+    assert "# volsr upscale: 4x (2x + bicubic 2x) with volsr-XS-2x.onnx" in (tmp_path / "e/summary.md").read_text()
     # --stretch auto, the default: where a voxel spans two output pixels or more (the phantom filling 512²), XS 2x
     assert main(["upscale", "--orbit", "1", "--size", "512", "--scale", "4", "--out", str(tmp_path / "f")]) == 0
     out = capsys.readouterr().out

@@ -1,10 +1,10 @@
-"""Single-frame resampling: the pixel-centre convention, constants and ramps, PyTorch's interpolate."""
+"""Single-frame resampling: the pixel-centre convention, constants and ramps, PyTorch's interpolate, the clamp."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from volsr_core.temporal.resample import upscale_bicubic, upscale_bilinear
+from volsr_core.temporal.resample import resize_bicubic, resize_bilinear, upscale_bicubic, upscale_bilinear
 
 
 @pytest.mark.parametrize("upscale", [upscale_bilinear, upscale_bicubic])
@@ -32,3 +32,26 @@ def test_upscaling_matches_torch_interpolate(scale):
     for mode, ours in (("bilinear", upscale_bilinear(lr, scale)), ("bicubic", upscale_bicubic(lr, scale, a=-0.75))):
         theirs = torch.nn.functional.interpolate(nchw, scale_factor=scale, mode=mode, align_corners=False)
         np.testing.assert_allclose(ours, theirs[0].permute(1, 2, 0).numpy(), atol=1e-5)
+
+
+@pytest.mark.parametrize("sizes", [((11, 13), (29, 17)), ((6, 4), (6, 4)), ((16, 20), (5, 7)), ((1, 3), (4, 9))])
+def test_resizing_to_any_size_matches_torch_interpolate_and_clamps_in_the_same_pass(sizes):
+    """The separable kernels (along rows, then down columns) at ratios up, none, down and mixed, one or three channels:
+    PyTorch's interpolate to the same size; ``clamp`` gives ``np.clip`` of the unclamped result, where bicubic's
+    overshoot at the random image's steps leaves [0, 1]."""
+    torch = pytest.importorskip("torch")
+    (h, w), (height, width) = sizes
+    for channels in (1, 3):
+        image = np.random.default_rng(h * w).random((h, w, channels), dtype=np.float32)
+        nchw = torch.from_numpy(image).permute(2, 0, 1)[None]
+        for mode, ours in (("bilinear", resize_bilinear(image, width, height)),
+                           ("bicubic", resize_bicubic(image, width, height, a=-0.75))):
+            theirs = torch.nn.functional.interpolate(nchw, size=(height, width), mode=mode, align_corners=False)
+            assert ours.shape == (height, width, channels) and ours.dtype == np.float32
+            np.testing.assert_allclose(ours, theirs[0].permute(1, 2, 0).numpy(), atol=1e-5)
+        unclamped = resize_bicubic(image, width, height, a=-0.75)
+        clamped = resize_bicubic(image, width, height, a=-0.75, clamp=(0.0, 1.0))
+        np.testing.assert_array_equal(clamped, np.clip(unclamped, 0.0, 1.0))
+        if (height, width) == (29, 17):
+            assert unclamped.min() < 0.0 or unclamped.max() > 1.0, "an upscale that overshoots: the clamp is tested"
+    assert resize_bilinear(image[..., 0], width, height).shape == (height, width), "an (h, w) image stays 2D"

@@ -265,18 +265,18 @@ def test_the_upscaler_drops_the_history_on_a_camera_jump_in_its_frames():
     assert upscaler.last_reset_reason == "camera turned" and upscaler.resets == 1
 
 
-def test_a_stretched_pipeline_is_the_model_at_a_smaller_size_then_bilinear():
+def test_a_stretched_pipeline_is_the_model_at_a_smaller_size_then_bicubic():
     """``Pipeline(scale=4, stretch=2)`` renders the 1/4-size frame, runs the 2x model to half the size and stretches
-    its image bilinearly: the images of a 2x pipeline at that size stretched by ``resize_bilinear``, frame by frame,
-    at a size the scale does not divide (the LR frame ceil(size / 4), the stretched image cropped as an unstretched
-    one is)."""
+    its image (Keys' cubic, a = -0.75, clamped to [0, 1]): the images of a 2x pipeline at that size stretched by
+    ``resize_bicubic``, frame by frame, at a size the scale does not divide (the LR frame ceil(size / 4), the
+    stretched image cropped as an unstretched one is)."""
     from volsr_core.io import make_phantom
     from volsr_core.runtime.methods import VolSR
     from volsr_core.runtime.pipeline import Pipeline
     from volsr_core.scene import Volume, get_preset
     from volsr_core.scene.camera_paths import orbit
     from volsr_core.temporal.jitter import halton_jitter, jitter_phases
-    from volsr_core.temporal.resample import resize_bilinear
+    from volsr_core.temporal.resample import resize_bicubic
 
     volume = Volume.from_record(make_phantom(shape=(40, 40, 40)))
     tf = get_preset("CT-Phantom")
@@ -286,12 +286,12 @@ def test_a_stretched_pipeline_is_the_model_at_a_smaller_size_then_bilinear():
     assert stretched.low_resolution_size == inner.low_resolution_size == (17, 13)
     for k, camera in enumerate(orbit(Camera.framing(volume.bounds), 4, degrees=3.0)):
         image = stretched.render(camera)
-        expected = resize_bilinear(inner.render(camera), 68, 52)[:50, :66]
+        expected = resize_bicubic(inner.render(camera), 68, 52, a=-0.75, clamp=(0.0, 1.0))[:50, :66]
         assert image.shape == (50, 66, 3) and np.abs(image - expected).max() == 0.0, k
         assert stretched.last_low_resolution.jitter == pytest.approx(halton_jitter(k, jitter_phases(2)))
     assert image.std() > 0.01
     assert stretched.last_timings["network_ms"] > 0
-    assert VolSR(stretched, "XS").label == "VolSR XS 2x + bilinear 2x" and VolSR(stretched, "XS").scale == 4
+    assert VolSR(stretched, "XS").label == "VolSR XS 2x + bicubic 2x" and VolSR(stretched, "XS").scale == 4
     with pytest.raises(ValueError, match="divides the scale, got 3 for 4x"):
         Pipeline(volume, tf, scale=4, stretch=3, variant="XS")
     assert Pipeline(volume, tf, stretch=2, variant="XS").scale == 4, "no scale: the shipped default's, stretched"

@@ -1,4 +1,4 @@
-"""The CUDA builds of TAAU, the layered TAAU, variant XS's base filter and the bilinear stretch agree with the CPU
+"""The CUDA builds of TAAU, the layered TAAU, variant XS's base filter and the stretches agree with the CPU
 kernels, alone, in the pipeline that keeps an XS frame on the device and in the benchmark's methods on a CUDA caster.
 
 Frames with motion, parallax, empty slabs, a still and a static view go through the CPU classes and their CUDA
@@ -109,8 +109,8 @@ METHODS = textwrap.dedent("""
     from volsr_core.runtime.methods import Native, ReducedSize, Taau
     from volsr_core.scene import Camera, Volume, get_preset
     from volsr_core.scene.camera_paths import orbit
-    from volsr_core.temporal.frames_cuda import resize_bilinear_device
-    from volsr_core.temporal.resample import resize_bilinear
+    from volsr_core.temporal.frames_cuda import resize_bicubic_device, resize_bilinear_device
+    from volsr_core.temporal.resample import resize_bicubic, resize_bilinear
 
     rng = np.random.default_rng(3)
     for (h, w), (height, width) in (((5, 7), (16, 21)), ((6, 4), (6, 4)), ((3, 3), (11, 2))):  # up, same, mixed
@@ -119,6 +119,11 @@ METHODS = textwrap.dedent("""
                            - resize_bilinear_device(cuda.to_device(image), width, height).copy_to_host()).max())
         print(f"bilinear {w}x{h} -> {width}x{height}: max abs difference {err:.2e}")
         assert err < 1e-6, err
+        cubic = resize_bicubic(image, width, height, a=-0.75, clamp=(0.0, 1.0))
+        err = float(np.abs(cubic - resize_bicubic_device(cuda.to_device(image), width, height, a=-0.75,
+                                                         clamp=(0.0, 1.0)).copy_to_host()).max())
+        print(f"bicubic {w}x{h} -> {width}x{height}: max abs difference {err:.2e}")
+        assert err < 1e-6 and cubic.min() >= 0.0 and cubic.max() <= 1.0, err
 
     volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
     cameras = orbit(Camera.framing(volume.bounds), 3, degrees=3.0)
@@ -155,16 +160,16 @@ def test_cuda_temporal_kernels_match_the_cpu_kernels():
 
 def test_the_xs_pipeline_on_the_device_gives_the_cpu_pipelines_images():
     """VolSR XS with ``device="cuda"``: frame, TAAU (2x) or layered TAAU (4x) and filter on the device (and the
-    stretch of XS 2x + bilinear 2x), one image back; the images of the CPU pipeline, frame by frame, and the LR frame
+    stretch of XS 2x + bicubic 2x), one image back; the images of the CPU pipeline, frame by frame, and the LR frame
     there when asked for."""
     assert run_script(PIPELINE).count("max abs difference") == 3 * 3
 
 
 def test_every_method_on_a_cuda_caster_makes_the_cpu_images_on_the_device():
     """Native (1 and 2 spp), 1/3 size + bilinear, TAAU and the layered TAAU on a CUDA ray caster: the full-size image
-    made on the device (the bilinear stretch too) gives the CPU methods' images, and its copy to the host is timed
-    apart (``ms_readback``, 0 on the CPU)."""
-    assert run_script(METHODS).count("max abs difference") == 3 + 5 * 3
+    made on the device (the bilinear stretch too, and VolSR's bicubic one alone) gives the CPU methods' images, and
+    its copy to the host is timed apart (``ms_readback``, 0 on the CPU)."""
+    assert run_script(METHODS).count("max abs difference") == 3 * 2 + 5 * 3
 
 
 def test_a_frames_buffers_index_as_numba_device_arrays_index():
@@ -231,8 +236,8 @@ def test_the_device_kernels_compile_for_a_gpu():
              (bf._filter_pixels, (hr3, np.zeros((2, 3, 5, 5), np.float32), np.zeros((2, 3), np.float32), second, True,
                                   f32, f32, hr3)),
              (bf._gather_every_nth, (motion, 2, np.zeros((4, 4, 2), np.float32))),
-             (fc._bilinear_pixels, (hr3, np.zeros((16, 2), np.int64), np.zeros((16, 2), np.float32),
-                                    np.zeros((16, 2), np.int64), np.zeros((16, 2), np.float32), hr3)),
+             (fc._resample_pixels, (hr3, np.zeros((16, 4), np.int64), np.zeros((16, 4), np.float32),
+                                    np.zeros((16, 4), np.int64), np.zeros((16, 4), np.float32), f32, f32, hr3)),
              (fc._add_sample, (np.zeros((16, 16, 3), np.float64), hr3, True)),
              (fc._divide, (np.zeros((16, 16, 3), np.float64), 2.0, hr3))]
     for kernel, args in calls:

@@ -26,7 +26,7 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
              "Medians over the measured frames of `volsr bench` (ONNX Runtime, CPU, 2 threads, or for variant XS its "
              "numba filter kernel, on the project's "
              "2-core machine; the LR render is the ray caster's; \"K slabs\": rendered in K depth slabs, the layered "
-             "TAAU before the model; \"+ bilinear Kx\": the model's image stretched by K, a point at K times its "
+             "TAAU before the model; \"+ bicubic Kx\": the model's image stretched by K, a point at K times its "
              "scale). \"vs curve\": PSNR minus that of native "
              "rendering at reduced size + bilinear at the same total time (positive: the model pays off).", "",
              "| run | volume | LR render ms | TAAU + network ms | total ms | PSNR dB | vs curve dB | native 1 spp |",
@@ -45,7 +45,7 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
                 margin = next(p["margin_db"] for p in points if p["label"] == mine["label"])
                 slabs = mine.get("slabs", 0)  # runs before the slabs were recorded had none
                 stretch = mine.get("stretch", 1)  # and none was stretched
-                how = (f", {slabs} slabs" if slabs else "") + (f", + bilinear {stretch}x" if stretch > 1 else "")
+                how = (f", {slabs} slabs" if slabs else "") + (f", + bicubic {stretch}x" if stretch > 1 else "")
                 lines.append(f"| {run}{how} | {mine['volume']} | {mine['ms_render']:.1f} | {mine['ms_network']:.1f} | "
                              f"{mine['ms_total']:.1f} | {mine['psnr']:.2f} | {margin:+.2f} | "
                              f"{native['psnr']:.2f} dB in {native['ms_total']:.1f} ms |")

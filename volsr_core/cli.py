@@ -302,7 +302,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                              else f"{summary.source}: {type(err).__name__}: {' '.join(str(err).split())}")
             print(f"volsr: error: {summary.error}", file=sys.stderr)
     failed = sum(s.error is not None for s in summaries)
-    whole = f"{scale * k}x" + (f" ({scale}x + bilinear {k}x)" if k > 1 else "")
+    whole = f"{scale * k}x" + (f" ({scale}x + bicubic {k}x)" if k > 1 else "")
     how = f"within a {args.budget_ms:g} ms frame budget" if args.budget_ms is not None else whole
     name = "-" if model is None else Path(str(model)).name + (" or stretched by the view (--stretch auto)"
                                                               if chose_stretch else "")
@@ -386,7 +386,7 @@ def add_upscale_parser(sub) -> None:
                     "docs/temporal.md), for an XS model to refine; 0: the TAAU on the frame's colour [auto: the "
                     "model's own, 2 for XS at 4x and more, else 0]")
     up.add_argument("--stretch", type=parse_stretch, default="auto", metavar="auto|K",
-                    help="run the model at 1/K of --size and stretch its image bilinearly by K to it: --scale 4 "
+                    help="run the model at 1/K of --size and stretch its image by K to it (bicubic): --scale 4 "
                     "--stretch 2 renders at 1/4 size and runs the 2x model to 1/2 size, as near the curve of "
                     "rendering fewer pixels as the 4x model or nearer where a voxel spans several output pixels "
                     "(1024² on the benchmark volumes; docs/performance.md, 'Where the history lives') [auto: 2 at an "
@@ -469,8 +469,8 @@ def add_bench_parser(sub) -> None:
     b.add_argument("--scales", type=parse_int_list, default=[2, 4, 8], metavar="S,..",
                    help="upscaling factors of TAAU and the VolSR models [2,4,8]")
     b.add_argument("--stretch", type=parse_int_list, default=[2], metavar="K,..",
-                   help="also every model whose scale times K is one of --scales, its image stretched bilinearly by "
-                   "K (a point at that scale: VolSR XS 2x + bilinear 2x at 4x); 1 for none [2]")
+                   help="also every model whose scale times K is one of --scales, its image stretched by K "
+                   "(bicubic: a point at that scale, VolSR XS 2x + bicubic 2x at 4x); 1 for none [2]")
     b.add_argument("--variants", default=",".join(VARIANTS), metavar="V,..",
                    help=f"VolSR model variants [{','.join(VARIANTS)}]")
     b.add_argument("--models-dir", metavar="DIR",

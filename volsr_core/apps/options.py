@@ -81,7 +81,7 @@ def parse_rgb(text: str) -> tuple[float, float, float]:
 
 
 MAX_SLABS = 8  # depth slabs a command line may ask for: the render and the history grow with each
-MAX_STRETCH = 8  # the bilinear stretch after the model a command line may ask for
+MAX_STRETCH = 8  # the bicubic stretch after the model a command line may ask for
 
 
 def parse_stretch(text: str) -> int | str:

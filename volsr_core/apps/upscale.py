@@ -193,7 +193,7 @@ class InputSummary:
     size: tuple[int, int] = (0, 0)
     low_resolution_size: tuple[int, int] = (0, 0)
     slabs: int = 0  # depth slabs each LR frame was rendered in (the layered TAAU's), 0: none
-    stretch: int = 1  # the bilinear stretch after the model (Pipeline's stretch), 1: none
+    stretch: int = 1  # the bicubic stretch after the model (Pipeline's stretch), 1: none
     timings: dict[str, list[float]] = field(default_factory=lambda: {"render_ms": [], "network_ms": [],
                                                                      "total_ms": [], "readback_ms": []})
     method_ms: dict[str, list[float]] = field(default_factory=dict)  # method -> total ms per frame
@@ -252,7 +252,7 @@ class InputSummary:
 def summary_markdown(summaries: Sequence[InputSummary], scale: str, model: str, budget_ms: float | None = None) -> str:
     """OUT/summary.md: per input and method, median ms per frame, its ratio to the native 1-spp render's
     and mean PSNR, so the trade between time and quality reads at a glance; in frame-budget mode
-    (``budget_ms``) also the frames each level made. ``scale`` as the title says it: "2x", "4x (2x + bilinear 2x)"."""
+    (``budget_ms``) also the frames each level made. ``scale`` as the title says it: "2x", "4x (2x + bicubic 2x)"."""
     title = f"a {budget_ms:g} ms frame budget" if budget_ms is not None else f"{scale} with {model}"
     lines = [f"# volsr upscale: {title}", "",
              "| input | frames | size | method | ms per frame (median) | time / native 1 spp | PSNR dB (mean) |",

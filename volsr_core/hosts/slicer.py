@@ -227,7 +227,7 @@ class SlicerSession:
         fps = 1000.0 / t["total_ms"] if t["total_ms"] > 0 else float("inf")
         stretch = adapter.pipeline.stretch  # "auto": 2 where a voxel of the view spans two pixels or more
         network = (f"{self.variant} {self.scale}x" if stretch == 1
-                   else f"{self.variant} {self.scale // stretch}x + bilinear {stretch}x")
+                   else f"{self.variant} {self.scale // stretch}x + bicubic {stretch}x")
         return (f"{t['total_ms']:.1f} ms/frame ({fps:.1f} fps): ray cast {lw}x{lh} {t['render_ms']:.1f} ms + "
                 f"{network} network to {w}x{h} {t['network_ms']:.1f} ms")
 

@@ -254,9 +254,9 @@ class VolSR(Method):
     @property
     def label(self) -> str:
         """'VolSR XS 4x in 2 slabs'; a stretched pipeline names its model's scale and the stretch: 'VolSR XS 2x +
-        bilinear 2x' is a 4x point."""
+        bicubic 2x' is a 4x point."""
         slabs = f" in {self.slabs} slabs" if self.slabs else ""
-        stretch = f" + bilinear {self.stretch}x" if self.stretch > 1 else ""
+        stretch = f" + bicubic {self.stretch}x" if self.stretch > 1 else ""
         return f"VolSR {self.variant} {self.scale // self.stretch}x{slabs}{stretch}"
 
     def reset(self) -> None:

@@ -22,9 +22,10 @@ from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
-from volsr_core.temporal.resample import resize_bilinear
+from volsr_core.temporal.resample import resize_bicubic
 
 STRETCH_FROM = 2.0  # stretch "auto": by 2 where a voxel spans at least this many output pixels (docs/performance.md)
+STRETCH_CUBIC_A = -0.75  # Keys' a of the stretch (PyTorch's, OpenCV's): the best of -0.5..-1.5, docs/performance.md
 
 
 class KeepsLastFrame:
@@ -40,15 +41,16 @@ class KeepsLastFrame:
 
 
 class Pipeline(KeepsLastFrame):
-    """Renders ``volume`` at 1/``scale`` of ``size`` and upscales it with ``model`` (and a bilinear ``stretch``).
+    """Renders ``volume`` at 1/``scale`` of ``size`` and upscales it with ``model`` (and a bicubic ``stretch``).
 
     - ``model``: an .onnx or .pt file, an ``nn.Module``, or None for the shipped model of
       ``variant`` at ``scale`` / ``stretch`` (resources/models, SHA-256 checked);
     - ``scale``: the upscaling factor from the rendered frame to ``size``; None: the model's own times
       ``stretch``, or for a shipped model :data:`~volsr_core.runtime.models.DEFAULT_SCALE` (2) times ``stretch``;
       a model of a scale other than ``scale`` / ``stretch`` is an error;
-    - ``stretch``: 1 (the default), or k > 1: the model makes 1/k of ``size`` and its image is stretched bilinearly
-      by k to ``size`` (the same view, as VTK stretches a reduced rendering), so that its history and filter work on
+    - ``stretch``: 1 (the default), or k > 1: the model makes 1/k of ``size`` and its image is stretched by k to
+      ``size`` (the same view, as VTK stretches a reduced rendering; Keys' cubic with :data:`STRETCH_CUBIC_A`, clamped
+      to [0, 1]: sharper than bilinear, for about its time), so that its history and filter work on
       k² times fewer pixels: where a voxel spans several output pixels, detail the frames' samples do not hold
       anyway (docs/performance.md, "Where the history lives"); "auto": at an even ``scale`` of 4 or more with a
       shipped model (``model`` None) at half of it, 2 where the view's voxels span at least :data:`STRETCH_FROM`
@@ -111,11 +113,11 @@ class Pipeline(KeepsLastFrame):
         self.model_scale = int(self.engine.config.scale)
         self.scale = self.model_scale * stretch
         self.slabs = self.upscaler.slabs
-        self._stretch = resize_bilinear  # the model's image to the full size, where the upscaler leaves it
+        self._stretch = resize_bicubic  # the model's image to the full size, where the upscaler leaves it
         if self.upscaler.on_device:
-            from volsr_core.temporal.frames_cuda import resize_bilinear_device
+            from volsr_core.temporal.frames_cuda import resize_bicubic_device
 
-            self._stretch = resize_bilinear_device
+            self._stretch = resize_bicubic_device
 
     @property
     def low_resolution_size(self) -> tuple[int, int]:
@@ -176,7 +178,7 @@ class Pipeline(KeepsLastFrame):
         rendered = time.perf_counter()
         image = self.upscaler.upscale(lr, self.caster.background)
         if self.stretch > 1:
-            image = self._stretch(image, w * self.scale, h * self.scale)
+            image = self._stretch(image, w * self.scale, h * self.scale, a=STRETCH_CUBIC_A, clamp=(0.0, 1.0))
         done = ready_at(image)
         image, readback_ms = to_host(image)
         self.last_timings = {"render_ms": 1000 * (rendered - started), "network_ms": 1000 * (done - rendered),

@@ -157,9 +157,9 @@ def markdown_report(results: dict[str, Any]) -> str:
              "sums, so it need not equal the two medians added. Time and ΔPSNR are relative to native full-size "
              "1-spp rendering.", ""]
     if any(r.get("stretch", 1) > 1 for r in results["rows"]):
-        lines += ["\"VolSR ... + bilinear Kx\": the model's image at 1/K of the size, stretched bilinearly to it "
-                  "(`Pipeline(..., stretch=K)`): a point at K times the model's scale, rendered at the size of the "
-                  "others at that scale; the stretch is in its network ms.", ""]
+        lines += ["\"VolSR ... + bicubic Kx\": the model's image at 1/K of the size, stretched to it by Keys' cubic "
+                  "(a = -0.75; `Pipeline(..., stretch=K)`): a point at K times the model's scale, rendered at the "
+                  "size of the others at that scale; the stretch is in its network ms.", ""]
     readback = [r["ms_readback"] for r in results["rows"] if r.get("ms_readback")]
     if readback:
         lines += [f"On the GPU every method makes its full-size image there (the bilinear stretch too, as VTK's) and "
@@ -212,11 +212,11 @@ def plot(results: dict[str, Any], path: str | os.PathLike) -> Path:
                     label="native + bilinear curve")
         seen = set()
         for r in mine:
-            stretch = r.get("stretch", 1)  # a VolSR model's image stretched bilinearly (runs before it: none)
+            stretch = r.get("stretch", 1)  # a VolSR model's image stretched (runs before it: none)
             volsr_style = ("P" if stretch > 1 else "*", volsr_colours.get(r["variant"], "C6"))
             marker, colour = styles.get(r["method"], volsr_style)
             name = {"native": "native", "bilinear": "native reduced + bilinear", "taau": "TAAU", "vtk": r["label"]}.get(
-                r["method"], f"VolSR {r['variant']}" + (" + bilinear" if stretch > 1 else ""))
+                r["method"], f"VolSR {r['variant']}" + (" + bicubic" if stretch > 1 else ""))
             ax.plot(r["ms_total"], r["psnr"], marker, color=colour, ms=9 if r["method"] == "volsr" else 6,
                     label=None if name in seen else name)
             seen.add(name)

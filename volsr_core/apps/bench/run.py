@@ -8,8 +8,8 @@ run, interleaved frame by frame (the order rotating per frame, so machine noise 
 - ``bilinear``: full size / ``factor`` (VTK's ImageSampleDistance), bilinearly upscaled;
 - ``taau``: full size / ``scale``, Halton-jittered, motion vectors, TAAU;
 - ``volsr``: :class:`~volsr_core.runtime.pipeline.Pipeline` for every model (variant, scale), and for each
-  ``stretches`` k > 1 every model whose scale times k is one of ``scales``, its image stretched bilinearly by k
-  (``Pipeline(..., stretch=k)``: a point at that scale, "VolSR XS 2x + bilinear 2x" at 4x);
+  ``stretches`` k > 1 every model whose scale times k is one of ``scales``, its image stretched by k
+  (``Pipeline(..., stretch=k)``, bicubic: a point at that scale, "VolSR XS 2x + bicubic 2x" at 4x);
 
 all of them :mod:`volsr_core.runtime.methods`.
 
