@@ -151,7 +151,7 @@ class ReducedSize(Method):
         width, height = self.size
         if self.kind == "bilinear":
             return resize_bilinear(colour, width, height)
-        return np.clip(resize_bicubic(colour, width, height), 0.0, 1.0)
+        return resize_bicubic(colour, width, height, clamp=(0.0, 1.0))
 
     def __call__(self, camera: Camera) -> MethodFrame:
         started = time.perf_counter()
