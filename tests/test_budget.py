@@ -12,6 +12,7 @@ pytest.importorskip("onnxruntime")
 
 from volsr_core.io import make_phantom  # noqa: E402
 from volsr_core.runtime.budget import BudgetRenderer, Level, levels, unpaid  # noqa: E402
+from volsr_core.runtime.methods import ReducedSize  # noqa: E402
 from volsr_core.runtime.models import PAYING_NETWORK_SHARE, model_file  # noqa: E402
 from volsr_core.scene import Volume, get_preset  # noqa: E402
 from volsr_core.scene.camera_paths import orbit_around  # noqa: E402
@@ -69,6 +70,27 @@ def test_a_reduced_size_level_renders_a_third_of_the_size_and_stretches_it(scene
     assert image.shape == (*SIZE[::-1], 3) and renderer.last_low_resolution is None, "the colour alone, as native"
     native = renderer.caster.render(camera, *SIZE).color
     assert psnr_ssim(image, native, channel_axis=-1)[0] > 20.0, "the same view, stretched over the full size"
+
+
+def test_the_shipped_4x_level_follows_the_view_as_the_hosts_do(scene):
+    """A shipped model at 4x runs with ``stretch="auto"``: where a voxel of the view spans two output pixels or more,
+    XS 2x at half the size stretched bicubically (the frame names it), else XS 4x; the same view either way."""
+    volume, tf, _ = scene
+    for size, expected in (((384, 384), "VolSR XS 2x + bicubic 2x"), ((96, 96), "VolSR XS 4x")):
+        renderer = BudgetRenderer(volume, tf, 1e6, size=size, choices=[Level(4, "XS")], threads=2)
+        camera = orbit_around(renderer.caster.visible_bounds(), 1, 2.0)[0]
+        per_voxel = renderer.caster.pixels_per_voxel(camera, size[1])
+        image = renderer.render(camera)
+        pipeline = renderer.pipelines[Level(4, "XS")]
+        print(f"{size[0]}²: {per_voxel:.2f} pixels per voxel, {renderer.state.level}")
+        assert renderer.state.level == expected and pipeline.stretch == (2 if per_voxel >= 2 else 1)
+        assert renderer.low_resolution_size == (size[0] // 4, size[1] // 4) and image.shape == (*size[::-1], 3)
+        native = renderer.caster.render(camera, *size).color
+        quarter = ReducedSize(renderer.caster, size, 4)(camera).image  # the same LR size, stretched bilinearly
+        ours, theirs = (psnr_ssim(x, native, channel_axis=-1)[0] for x in (image, quarter))
+        print(f"  vs native 1 spp: {ours:.2f} dB; the 1/4-size render + bilinear: {theirs:.2f} dB")
+        assert ours > theirs - 1.0, "the same view, at the full size"
+        assert list(renderer.state.ms_estimates) == ["VolSR XS 4x"], "its estimate is the level's, either way"
 
 
 def test_a_budget_below_the_2x_model_takes_taau_2x_before_any_4x_level(scene):

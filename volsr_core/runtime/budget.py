@@ -4,13 +4,12 @@ As VTK's AutoAdjustSampleDistances picks its sample distance from the last frame
 :class:`BudgetRenderer` keeps a running estimate of each level's ms per frame and renders every
 moving frame with the finest level whose estimate fits ``budget_ms``. The levels, finest first
 (:func:`levels`): native full size, then by the size of the rendered frame, from 1/2 down: at a
-scale the shipped models (largest variant first), TAAU alone, then the reduced-size render
-stretched bilinearly (what VTK's ImageSampleDistance gives; also at 1/2.5, 1/3, 1/5 and 1/6, between
-the scales, as VTK's distance is continuous); each with its
-own history (a :class:`~volsr_core.runtime.pipeline.Pipeline`, or a :class:`MethodLevel`). The
-order is measured (docs/performance.md): at a size a model beats the TAAU it refines and TAAU the
-bilinear upscale, and fewer rendered pixels lose whatever follows (TAAU 2x beats the 4x models by
-3.6-5.2 dB at 512²).
+scale the shipped models (largest variant first; at 4x following the view as the hosts do, ``stretch="auto"``),
+TAAU alone, then the reduced-size render stretched bilinearly (what VTK's ImageSampleDistance gives; also at
+1/2.5, 1/3, 1/5 and 1/6, between the scales, as VTK's distance is continuous); each with its own history (a
+:class:`~volsr_core.runtime.pipeline.Pipeline`, or a :class:`MethodLevel`). The order is measured
+(docs/performance.md): at a size a model beats the TAAU it refines and TAAU the bilinear upscale, and fewer
+rendered pixels lose whatever follows (TAAU 2x beats the 4x models by 3.6-5.2 dB at 512²).
 
 A model whose network costs more than :data:`~volsr_core.runtime.models.PAYING_NETWORK_SHARE` of
 its LR render, as measured when the levels are timed, is left out (:func:`unpaid`): the same time
@@ -97,6 +96,15 @@ def unpaid(estimates: dict[Level, float]) -> dict[Level, str]:
     return left_out
 
 
+def drawn_label(level: Level, pipeline: Any) -> str:
+    """What a frame of ``level`` was: its label, or for a model level whose pipeline stretched its image
+    (``Pipeline(stretch="auto")``) the model that ran and the stretch: 'VolSR XS 2x + bicubic 2x'."""
+    stretch = getattr(pipeline, "stretch", 1)
+    if stretch == 1:
+        return level.label
+    return f"VolSR {level.variant} {level.scale // stretch}x + bicubic {stretch}x"
+
+
 class MethodLevel(KeepsLastFrame):
     """TAAU alone or a reduced-size render + bilinear (a :mod:`~volsr_core.runtime.methods` method on the
     renderer's caster), with the part of the :class:`~volsr_core.runtime.pipeline.Pipeline` interface the
@@ -133,7 +141,10 @@ class BudgetRenderer(KeepsLastFrame):
 
     - ``choices``: the :class:`Level` list to choose from, finest first (default :func:`levels` of the
       shipped models, less the TAAU levels whose scale does not divide ``size``); ``model_files`` maps
-      a model level to its model file (default: the shipped one). The model levels :func:`unpaid` finds
+      a model level to its model file (default: the shipped one, which at an even scale of 4 or more follows the view
+      as in the hosts, ``Pipeline(stretch="auto")``: the model of half the scale at half the size, stretched
+      bicubically, where a voxel spans two output pixels or more; the frame's ``state.level`` then names it, e.g.
+      'VolSR XS 2x + bicubic 2x'). The model levels :func:`unpaid` finds
       when the levels are timed are then dropped from ``choices``; ``left_out`` says why;
     - ``smoothing``: weight of a new measurement in a level's running ms estimate;
     - ``finer_margin``: a finer level is taken only when its estimate is below this fraction of the
@@ -157,7 +168,7 @@ class BudgetRenderer(KeepsLastFrame):
                  background: tuple[float, float, float] = (0.0, 0.0, 0.0)):
         if not budget_ms > 0:
             raise ValueError(f"budget_ms must be positive, got {budget_ms}")
-        from volsr_core.runtime.models import model_file, shipped_models
+        from volsr_core.runtime.models import shipped_models
 
         self.budget_ms, self.size = float(budget_ms), (int(size[0]), int(size[1]))
         self.smoothing, self.finer_margin = float(smoothing), float(finer_margin)
@@ -177,10 +188,13 @@ class BudgetRenderer(KeepsLastFrame):
                     raise ValueError(f"TAAU {level.scale}x needs a size divisible by {level.scale}, got {self.size}")
                 self.pipelines[level] = MethodLevel(Taau(self.caster, self.size, level.scale))
             elif level.scale > 1:
-                model = files.get(level) or model_file(level.variant, level.scale)
+                # a shipped model follows the view as the hosts' does (stretch "auto": at 4x the 2x model at half
+                # the size, stretched, where a voxel spans two output pixels or more); a given file runs as it is
+                model = files.get(level)
                 self.pipelines[level] = Pipeline(volume, transfer_function, model, scale=level.scale, size=self.size,
                                                  variant=level.variant, device=device, threads=threads,
-                                                 sample_distance=sample_distance, background=background)
+                                                 sample_distance=sample_distance, background=background,
+                                                 stretch="auto" if model is None else 1)
         self.estimates: dict[Level, float] = {}
         self.left_out: dict[str, str] = {}
         self.current: Level | None = None
@@ -264,7 +278,7 @@ class BudgetRenderer(KeepsLastFrame):
             if level != self.current and level in self.pipelines:
                 self.pipelines[level].reset("level changed")
             self.current = level
-            image, label = self._render_level(level, camera), level.label
+            image, label = self._render_level(level, camera), drawn_label(level, self.pipelines.get(level))
         ms = 1000.0 * (time.perf_counter() - started)
         pipeline = self.pipelines.get(self.current) if label != "still" else None
         if pipeline is not None:
