@@ -32,7 +32,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from volsr_core.render.raycaster import RayCaster
-from volsr_core.runtime.methods import ReducedSize, Taau
+from volsr_core.runtime.methods import ReducedSize, Taau, VolSR
 from volsr_core.runtime.models import PAYING_NETWORK_SHARE
 from volsr_core.runtime.pipeline import KeepsLastFrame, Pipeline
 from volsr_core.scene.camera import Camera
@@ -99,10 +99,9 @@ def unpaid(estimates: dict[Level, float]) -> dict[Level, str]:
 def drawn_label(level: Level, pipeline: Any) -> str:
     """What a frame of ``level`` was: its label, or for a model level whose pipeline stretched its image
     (``Pipeline(stretch="auto")``) the model that ran and the stretch: 'VolSR XS 2x + bicubic 2x'."""
-    stretch = getattr(pipeline, "stretch", 1)
-    if stretch == 1:
+    if getattr(pipeline, "stretch", 1) == 1:
         return level.label
-    return f"VolSR {level.variant} {level.scale // stretch}x + bicubic {stretch}x"
+    return VolSR(pipeline, level.variant).label
 
 
 class MethodLevel(KeepsLastFrame):
