@@ -8,6 +8,8 @@ stretches a reduced-size rendering over the viewport.
 """
 from __future__ import annotations
 
+import functools
+
 import numba
 import numpy as np
 
@@ -21,8 +23,10 @@ def _keys_cubic(d: np.ndarray, a: float) -> np.ndarray:
     return np.where(d <= 1.0, near, far)
 
 
+@functools.lru_cache(maxsize=64)
 def _axis_taps(n_in: int, n_out: int, cubic: bool, a: float) -> tuple[np.ndarray, np.ndarray]:
-    """Input indices and weights, each (n_out, taps), along one axis, edge pixels repeated.
+    """Input indices and weights, each (n_out, taps), along one axis, edge pixels repeated; computed once per
+    lengths and kernel (a stretch repeats them every frame), read-only.
 
     Output pixel X's centre lies at input index-space position s = (X + 0.5) * n_in / n_out - 0.5
     (input pixel i's centre at i); it takes the 2 linear taps or the 4 Keys-cubic taps around s.
@@ -32,7 +36,10 @@ def _axis_taps(n_in: int, n_out: int, cubic: bool, a: float) -> tuple[np.ndarray
     offsets = np.arange(-1, 3) if cubic else np.arange(0, 2)
     d = np.abs(s[:, None] - (i0[:, None] + offsets))
     weights = _keys_cubic(d, a) if cubic else 1.0 - d
-    return np.clip(i0[:, None] + offsets, 0, n_in - 1), weights.astype(np.float32)
+    taps = np.clip(i0[:, None] + offsets, 0, n_in - 1), weights.astype(np.float32)
+    for t in taps:
+        t.flags.writeable = False
+    return taps
 
 
 @numba.njit(fastmath=True, boundscheck=False, cache=True)
@@ -90,7 +97,7 @@ def _resize(image: np.ndarray, height: int, width: int, cubic: bool, a: float = 
     h, w = image.shape[:2]
     planes = np.ascontiguousarray(image.reshape(h, w, -1))
     out = np.empty((height, width, planes.shape[2]), dtype=np.float32)
-    _resample_kernel(planes, *_axis_taps(h, height, cubic, a), *_axis_taps(w, width, cubic, a),
+    _resample_kernel(planes, *_axis_taps(h, height, cubic, float(a)), *_axis_taps(w, width, cubic, float(a)),
                      np.float32(clamp[0]), np.float32(clamp[1]), out)
     return out.reshape((height, width) + image.shape[2:])
 
