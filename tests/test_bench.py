@@ -51,6 +51,11 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
             assert r[key] is not None and math.isfinite(r[key]), (r["label"], key)
         assert r["ms_render"] > 0 and r["ms_total"] > 0 and 0 < r["ssim"] <= 1
         assert len(r["psnr_frames"]) == 3  # 4 frames, 1 warm-up
+        # timed in 3 passes by default (the scored one and two more): 3 frames each, the medians over all 9
+        assert len(r["ms_total_frames"]) == 9 and len(r["ms_total_passes"]) == 3, r["label"]
+        assert r["ms_total"] == pytest.approx(float(np.median(r["ms_total_frames"])), abs=1e-3)
+        assert r["ms_total_passes"] == pytest.approx([float(np.median(r["ms_total_frames"][3 * p:3 * p + 3]))
+                                                      for p in range(3)], abs=1e-3)
         assert (r["ms_network"] == 0) == (r["method"] == "native")
     volsr = rows["VolSR S 4x"]  # scale and variant came from the ONNX metadata
     assert (volsr["method"], volsr["variant"], volsr["scale"], volsr["model"]) == ("volsr", "S", 4, "s4.onnx")
@@ -58,6 +63,7 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
     assert (stretched["scale"], stretched["stretch"], stretched["model"], volsr["stretch"]) == (8, 2, "s4.onnx", 1)
     assert results["settings"]["stretches"] == [2]
     assert results["settings"]["onnxruntime_threads"] == 2 and results["settings"]["measured_frames"] == 3
+    assert results["settings"]["timing_passes"] == 3 and results["settings"]["timed_frames"] == 9
 
 
 def test_quality_orders_as_expected(bench_run):
@@ -74,6 +80,7 @@ def test_reports_and_target_verdicts(bench_run):
     md = (out / "bench.md").read_text()
     assert "## phantom, CT-Phantom" in md and "| VolSR S 4x |" in md and "| native 1 spp |" in md
     assert "after 1 warm-up frames" in md and "8-spp" in md
+    assert "in 3 passes over the orbit (9 frames a method" in md
     assert "| VolSR S 4x + bicubic 2x |" in md and "the model's image at 1/K of the size, stretched" in md
     assert "1. VolSR at 4x reaches at least native 1-spp PSNR" in md and "2. Every VolSR point lies at least" in md
     from PIL import Image
@@ -212,12 +219,60 @@ def test_resize_to_any_size_matches_bilinear_at_integer_ratios():
     assert resize_bilinear(lr[..., 0], 10, 12).shape == (12, 10)
 
 
+def test_timing_passes_run_fresh_methods_over_the_same_orbit_and_leave_the_scores_alone():
+    from volsr_core.apps.bench.run import bench_one, build_methods
+    from volsr_core.apps.bench.scenes import load_bench_volume
+    from volsr_core.render.raycaster import RayCaster
+    from volsr_core.scene.camera_paths import orbit_around
+
+    scene = load_bench_volume(None, None, "auto")
+    caster = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign")
+    size = (32, 32)
+    cameras = orbit_around(caster.visible_bounds(), 4, 2.0)
+
+    def methods():
+        return build_methods(scene, caster, size, spp=(1,), factors=(2,), scales=(2,), threads=1)
+
+    calls = []
+
+    class Counted:  # a method that notes each frame it renders
+        def __init__(self, method):
+            self.method = method
+
+        def __getattr__(self, name):
+            return getattr(self.method, name)
+
+        def __call__(self, camera):
+            calls.append(id(self))
+            return self.method(camera)
+
+    one = bench_one(scene, caster, size, methods(), cameras, reference_spp=4, warmup=1)
+    extra = [[Counted(m) for m in methods()] for _ in range(2)]
+    three = bench_one(scene, caster, size, methods(), cameras, reference_spp=4, warmup=1, timing_passes=iter(extra))
+    assert len(calls) == 2 * len(cameras) * len(extra[0]), "every fresh method renders every frame of its pass"
+    assert {id(m) for m in extra[0] + extra[1]} == set(calls)
+    for a, b in zip(one, three):  # the scored pass is the same work: the same quality, frame for frame
+        assert a["label"] == b["label"] and a["psnr_frames"] == pytest.approx(b["psnr_frames"], abs=1e-6)
+        assert len(a["ms_total_frames"]) == 3 and len(b["ms_total_frames"]) == 9 and len(b["ms_total_passes"]) == 3
+    with pytest.raises(ValueError, match="the scored pass.s methods, in its order"):
+        bench_one(scene, caster, size, methods(), cameras, reference_spp=4, warmup=1,
+                  timing_passes=[methods()[::-1]])
+
+
 def test_bad_settings_give_one_line_errors(tmp_path):
     from volsr_core.cli import main
 
     assert main(["bench", "--size", "60", "--scales", "8", "--out", str(tmp_path / "b")]) == 2
     assert main(["bench", "--size", "64", "--spp", "16", "--out", str(tmp_path / "b")]) == 2
     assert main(["bench", "--size", "64", "--frames", "2", "--warmup", "2", "--out", str(tmp_path / "b")]) == 2
+    with pytest.raises(SystemExit) as exit_:  # argparse's own one-line usage error
+        main(["bench", "--size", "64", "--timing-passes", "0", "--out", str(tmp_path / "b")])
+    assert exit_.value.code == 2
+    from volsr_core.apps.bench.run import run_benchmark
+    from volsr_core.errors import InputError
+
+    with pytest.raises(InputError, match="at least 1 timing pass"):
+        run_benchmark(size=(64, 64), timing_passes=0, progress=False)
 
 
 def test_vtk_row_is_vtks_own_mapper_in_the_same_run(tmp_path):

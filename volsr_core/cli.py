@@ -424,7 +424,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         reference_spp=args.reference_spp, spp=args.native_spp, factors=args.factors, scales=args.scales,
         stretches=args.stretch, variants=[v.strip().upper() for v in args.variants.split(",") if v.strip()],
         models_dir=args.models_dir, preset=args.preset, placement=args.range, threads=args.threads,
-        device=args.device, vtk=args.vtk)
+        device=args.device, vtk=args.vtk, timing_passes=args.timing_passes)
     written = report.write_outputs(results, out)
     for scene, targets in results["targets"].items():
         print(f"{scene}:")
@@ -443,8 +443,8 @@ def add_bench_parser(sub) -> None:
                        "VolSR (Pipeline, onnxruntime) for every model of --variants at --scales, and stretched by "
                        "--stretch to --scales. PSNR and SSIM "
                        "against a --reference-spp supersampled native rendering are averaged over the frames after "
-                       "--warmup warm-up frames; ms per frame are medians over the same frames. Also checks the "
-                       "targets of docs/performance.md.")
+                       "--warmup warm-up frames; ms per frame are medians over the same frames of --timing-passes "
+                       "passes. Also checks the targets of docs/performance.md.")
     b.add_argument("volumes", nargs="*", metavar="VOLUME[:PRESET[:RANGE]]",
                    help="volume files as volsr render takes them, each optionally with its preset and range (auto, "
                    "none or LO,HI), e.g. CT_AVM.nii.gz:CT-AAA:0,446 LIDC2.mha:CT-Bone:0,255 bonsai.nii.gz:CT-Bone "
@@ -460,6 +460,9 @@ def add_bench_parser(sub) -> None:
     b.add_argument("--degrees", type=DEGREES, default=2.0, metavar="DEG", help="orbit step per frame, degrees [2]")
     b.add_argument("--warmup", type=AT_LEAST_0, default=4, metavar="N",
                    help="first frames left out of quality and time (history builds up, kernels compile) [4]")
+    b.add_argument("--timing-passes", type=AT_LEAST_1, default=3, metavar="N",
+                   help="passes over the orbit whose times count: the scored one and N - 1 more with fresh methods, "
+                   "timed only (one pass's 8 frames decide no 0.5 dB margin at 1024² on a 2-core machine) [3]")
     b.add_argument("--reference-spp", type=AT_LEAST_1, default=16, metavar="N",
                    help="jittered samples per pixel of the ground truth [16]")
     b.add_argument("--spp", dest="native_spp", type=parse_int_list, default=[1, 2, 4], metavar="N,..",

@@ -138,6 +138,15 @@ def _ms(v: float | None) -> str:
     return "-" if v is None else f"{v:.1f}"
 
 
+def _passes(settings: dict[str, Any]) -> str:
+    """How many passes over the orbit the times come from, for bench.md ("" for one: a run of an older version)."""
+    passes = settings.get("timing_passes", 1)
+    if passes == 1:
+        return ""
+    return (f" in {passes} passes over the orbit ({settings['timed_frames']} frames a method: the scored pass and "
+            f"{passes - 1} more with fresh methods, timed only)")
+
+
 def markdown_report(results: dict[str, Any]) -> str:
     """bench.md: settings, a table per scene with ratios to native 1 spp, and the target verdicts."""
     s = results["settings"]
@@ -146,8 +155,8 @@ def markdown_report(results: dict[str, Any]) -> str:
              f"{width}x{height} pixels; camera orbiting {s['frames']} frames of {s['degrees_per_frame']:g}° each; "
              f"quality (PSNR, SSIM against a {s['reference_spp']}-spp supersampled native rendering) averaged over "
              f"the {s['measured_frames']} frames after {s['warmup']} warm-up frames; times are medians over the same "
-             f"frames. All methods in one run, interleaved frame by frame; onnxruntime {s['onnxruntime_threads']} "
-             f"threads, numba {s['numba_threads']} threads, device {s['device']}. "
+             f"frames{_passes(s)}. All methods in one run, interleaved frame by frame; onnxruntime "
+             f"{s['onnxruntime_threads']} threads, numba {s['numba_threads']} threads, device {s['device']}. "
              f"Machine: {results['machine']['processor']}, {results['machine']['cpu_count']} CPUs"
              + (f" ({results['machine']['cpu']})" if results["machine"].get("cpu") else "")
              + f", {results['machine']['date']}.", "",

@@ -15,9 +15,13 @@ all of them :mod:`volsr_core.runtime.methods`.
 
 Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per
 pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image). Quality is averaged over the
-frames after ``warmup`` warm-up frames; times are medians over the same frames (the warm-up also
-absorbs kernel compilation). ``ms_render`` is the ray casting, ``ms_network`` what follows it (TAAU
-and the network for VolSR, the bilinear or TAAU upscaling for those, 0 for native), ``ms_total`` their sum.
+frames after ``warmup`` warm-up frames; times are medians over the same frames of ``timing_passes``
+passes over the orbit: the scored one and ``timing_passes - 1`` more with fresh methods (their histories
+empty again), timed and not scored (the warm-up also absorbs kernel compilation). A method's time on this
+2-core machine moves by 10-30% from frame to frame (the orbit's views and the machine alike), so the median of
+one pass's 8 frames moved the margins by up to 1.2 dB between runs at 1024² (docs/performance.md).
+``ms_render`` is the ray casting, ``ms_network`` what follows it (TAAU and the network for VolSR, the bilinear or
+TAAU upscaling for those, 0 for native), ``ms_total`` their sum; ``ms_total_passes`` each pass's median.
 On ``device="cuda"`` every method makes its full-size image on the GPU and its times end when the GPU is done;
 ``ms_readback``, the image's copy to the host for scoring (0 on the CPU), is not in ``ms_total``.
 
@@ -34,7 +38,7 @@ import statistics
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Iterable, Sequence
 
 import numba
 import numpy as np
@@ -188,9 +192,27 @@ def cpu_description(cpuinfo: str = "/proc/cpuinfo") -> str | None:
 
 
 # -- the benchmark --------------------------------------------------------------------------------
+def _one_pass(methods: Sequence[Method], cameras: Sequence, warmup: int, turn: int, measured, progress=None) -> None:
+    """Every method renders every camera in order, interleaved frame by frame, the first method rotating with the
+    frame (and by ``turn`` between passes) so machine noise hits all alike; ``measured(i, t, frame)`` gets method
+    i's frame t after the warm-up."""
+    for t, camera in enumerate(cameras):
+        k = (t + turn) % len(methods)
+        for i in list(range(k, len(methods))) + list(range(k)):
+            frame = methods[i](camera)
+            if t >= warmup:
+                measured(i, t, frame)
+            if progress is not None:
+                progress.update()
+
+
 def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int], methods: Sequence[Method],
-              cameras: Sequence, reference_spp: int = 16, warmup: int = 4, progress=None) -> list[dict[str, Any]]:
-    """Rows (one per method) for one volume; see the module docstring for what is measured."""
+              cameras: Sequence, reference_spp: int = 16, warmup: int = 4, progress=None,
+              timing_passes: Iterable[Sequence[Method]] = ()) -> list[dict[str, Any]]:
+    """Rows (one per method) for one volume; see the module docstring for what is measured.
+
+    ``timing_passes``: fresh method lists (the same methods, in the same order, each built anew) for the passes
+    after the scored one, taken one at a time (a generator builds each only when its pass starts)."""
     from volsr_core.sr.metrics import psnr_ssim
     from volsr_core.temporal import render_supersampled
 
@@ -202,24 +224,36 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
         truth.append(to_host(image)[0])
         if progress is not None:
             progress.update()
-    records = [{"render": [], "network": [], "readback": [], "psnr": [], "ssim": []} for _ in methods]
-    for t, camera in enumerate(cameras):
-        k = t % len(methods)
-        for i in list(range(k, len(methods))) + list(range(k)):
-            frame = methods[i](camera)
-            if t >= warmup:
-                psnr, ssim = psnr_ssim(frame.image[:height, :width], truth[t], channel_axis=-1)
-                rec = records[i]
-                rec["render"].append(frame.ms_render)
-                rec["network"].append(frame.ms_upscale)
-                rec["readback"].append(frame.ms_readback)
-                rec["psnr"].append(psnr)
-                rec["ssim"].append(ssim)
-            if progress is not None:
-                progress.update()
+    records = [{"render": [], "network": [], "readback": [], "psnr": [], "ssim": [], "passes": []} for _ in methods]
+
+    def timed(i: int, frame) -> None:
+        rec = records[i]
+        rec["render"].append(frame.ms_render)
+        rec["network"].append(frame.ms_upscale)
+        rec["readback"].append(frame.ms_readback)
+
+    def scored(i: int, t: int, frame) -> None:
+        timed(i, frame)
+        psnr, ssim = psnr_ssim(frame.image[:height, :width], truth[t], channel_axis=-1)
+        records[i]["psnr"].append(psnr)
+        records[i]["ssim"].append(ssim)
+
+    def end_pass() -> None:
+        for rec in records:
+            rec["passes"].append(len(rec["render"]))
+
+    _one_pass(methods, cameras, warmup, 0, scored, progress)
+    end_pass()
+    for turn, fresh in enumerate(timing_passes, start=1):
+        if [m.label for m in fresh] != [m.label for m in methods]:
+            raise ValueError("a timing pass must run the scored pass's methods, in its order")
+        _one_pass(fresh, cameras, warmup, turn, lambda i, t, frame: timed(i, frame), progress)
+        end_pass()
     rows = []
     for method, rec in zip(methods, records):
         total = [a + b for a, b in zip(rec["render"], rec["network"])]
+        ends = rec["passes"]
+        by_pass = [total[start:end] for start, end in zip([0] + ends[:-1], ends)]
         rows.append({
             "scene": bench_volume.label, "volume": bench_volume.name, "preset": bench_volume.preset,
             "range": [float(v) for v in bench_volume.transfer_function.value_range],
@@ -231,7 +265,8 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
             "ms_readback": _finite(statistics.median(rec["readback"])),
             "psnr": _finite(float(np.mean(rec["psnr"]))), "ssim": _finite(float(np.mean(rec["ssim"]))),
             "psnr_frames": [_finite(v) for v in rec["psnr"]],
-            "ms_total_frames": [_finite(v) for v in total],
+            "ms_total_frames": [_finite(v) for v in total],  # pass after pass, the scored one first
+            "ms_total_passes": [_finite(statistics.median(times)) for times in by_pass],
         })
     return rows
 
@@ -247,12 +282,14 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
                   stretches: Sequence[int] = STRETCHES, variants: Sequence[str] = VARIANTS,
                   models_dir: str | os.PathLike | None = None,
                   preset: str | None = None, placement: str | tuple[float, float] = "auto", threads: int | None = 2,
-                  device: str = "cpu", progress: bool = True, vtk: str | None = None) -> dict[str, Any]:
+                  device: str = "cpu", progress: bool = True, vtk: str | None = None,
+                  timing_passes: int = 3) -> dict[str, Any]:
     """Benchmark every volume (specs, :func:`~volsr_core.apps.bench.scenes.parse_volume_spec`; none: the phantom).
 
     Returns ``{"settings", "machine", "models", "rows", "targets"}`` (what bench.json holds).
     ``scales`` are TAAU's and the VolSR models' (``variants`` filters the models); ``stretches`` add the stretched
-    VolSR rows (:func:`volsr_rows`; (1,) or () for none).
+    VolSR rows (:func:`volsr_rows`; (1,) or () for none); ``timing_passes`` (1 or more) the passes over the orbit
+    whose times count (the module docstring).
     """
     from tqdm import tqdm
 
@@ -263,6 +300,8 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
         raise InputError(None, f"variants must come from {', '.join(VARIANTS)}, got {', '.join(bad)}")
     size = (int(size[0]), int(size[1]))
     _check_settings(size, frames, warmup, spp, factors, scales, reference_spp)
+    if timing_passes < 1:
+        raise InputError(None, f"need at least 1 timing pass (the scored one), got {timing_passes}")
     specs = list(volumes) if volumes else [None]
     models = find_models(models_dir, variants, model_scales(scales, stretches))
     rows_of_models = volsr_rows(models, scales, stretches)
@@ -270,17 +309,23 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
     volumes_ = [load_bench_volume(spec, preset, placement) for spec in specs]
     n_methods = len(spp) + len(factors) + len(scales) + len(rows_of_models) + (vtk is not None)
     rows: list[dict[str, Any]] = []
-    with tqdm(total=len(volumes_) * frames * (1 + n_methods), desc="bench", unit="render", disable=not progress) as bar:
+    renders = len(volumes_) * frames * (1 + n_methods * timing_passes)
+    with tqdm(total=renders, desc="bench", unit="render", disable=not progress) as bar:
         for bench_volume in volumes_:
             bar.set_postfix_str(bench_volume.name)
             caster = RayCaster(bench_volume.volume, bench_volume.transfer_function, device=device, start_jitter="ign")
-            methods = build_methods(bench_volume, caster, size, spp, factors, scales, rows_of_models, threads, device,
-                                    vtk)
+
+            def fresh_methods() -> list[Method]:
+                return build_methods(bench_volume, caster, size, spp, factors, scales, rows_of_models, threads,
+                                     device, vtk)
+
             cameras = orbit_around(caster.visible_bounds(), frames, degrees, aspect=size[0] / size[1])
-            rows += bench_one(bench_volume, caster, size, methods, cameras, reference_spp, warmup, bar)
+            more = (fresh_methods() for _ in range(timing_passes - 1))
+            rows += bench_one(bench_volume, caster, size, fresh_methods(), cameras, reference_spp, warmup, bar, more)
 
     settings = {"size": list(size), "frames": frames, "degrees_per_frame": degrees, "warmup": warmup,
-                "measured_frames": frames - warmup, "reference_spp": reference_spp, "spp": list(spp),
+                "measured_frames": frames - warmup, "timing_passes": timing_passes,
+                "timed_frames": (frames - warmup) * timing_passes, "reference_spp": reference_spp, "spp": list(spp),
                 "factors": list(factors), "scales": list(scales), "stretches": list(stretches),
                 "variants": [v.upper() for v in variants],
                 "models_dir": None if models_dir is None else str(models_dir), "onnxruntime_threads": threads,
