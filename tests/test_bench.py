@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from volsr_core.apps.bench.report import check_targets, curve_psnr_at, pareto_front
+from volsr_core.apps.bench.report import check_targets, curve_psnr_at, curve_time_for, pareto_front, target_lines
 from volsr_core.apps.bench.scenes import parse_volume_spec as parse_scene_spec
 from volsr_core.temporal.resample import resize_bilinear, upscale_bilinear
 
@@ -81,6 +81,9 @@ def test_reports_and_target_verdicts(bench_run):
     assert "## phantom, CT-Phantom" in md and "| VolSR S 4x |" in md and "| native 1 spp |" in md
     assert "after 1 warm-up frames" in md and "8-spp" in md
     assert "in 3 passes over the orbit (9 frames a method" in md
+    s4 = by_label(results)["VolSR S 4x"]  # each pass's median in its own column
+    each = " / ".join(f"{v:.1f}" for v in s4["ms_total_passes"])
+    assert f"| VolSR S 4x | {s4['ms_render']:.1f} | {s4['ms_network']:.1f} | {s4['ms_total']:.1f} | {each} |" in md
     assert "| VolSR S 4x + bicubic 2x |" in md and "the model's image at 1/K of the size, stretched" in md
     assert "1. VolSR at 4x reaches at least native 1-spp PSNR" in md and "2. Every VolSR point lies at least" in md
     from PIL import Image
@@ -134,6 +137,16 @@ def test_curve_interpolates_linearly_in_time_and_holds_its_ends():
     assert curve_psnr_at(times, psnrs, 5.0) == 20.0 and curve_psnr_at(times, psnrs, 50.0) == 30.0
 
 
+def test_curve_time_for_a_psnr_inverts_the_curve():
+    times, psnrs = [40.0, 10.0, 20.0], [30.0, 20.0, 22.0]  # any order, as curve_psnr_at
+    for at in (10.0, 15.0, 20.0, 33.0, 40.0):
+        assert curve_time_for(times, psnrs, curve_psnr_at(times, psnrs, at)) == pytest.approx(at)
+    assert curve_time_for(times, psnrs, 19.0) is None  # the curve starts above it: at no time
+    assert curve_time_for(times, psnrs, 31.0) == math.inf  # never reaches it: at any time
+    # not rising: the first time it reaches the PSNR (the later dip does not count)
+    assert curve_time_for([0.0, 10.0, 20.0, 30.0], [20.0, 24.0, 21.0, 26.0], 22.0) == pytest.approx(5.0)
+
+
 def row(method, label, ms, psnr, scale=1, spp=1):
     return {"scene": "v", "method": method, "label": label, "ms_total": ms, "psnr": psnr, "scale": scale, "spp": spp}
 
@@ -154,6 +167,15 @@ def test_targets_from_hand_made_rows():
     t = check_targets(base + [slow, weak])["v"]
     assert t["fast_4x"]["met"] is False and t["above_bilinear"]["met"] is False
     assert t["above_bilinear"]["points"][1]["margin_db"] == pytest.approx(0.0)
+    # 24 dB would be 0.5 above the curve where it is at 23.5 dB: 17.5 ms, 2.5 ms sooner than the point's 20
+    assert t["above_bilinear"]["points"][1]["ms_needed"] == pytest.approx(17.5)
+    assert "ms_needed" not in t["above_bilinear"]["points"][0], "a point that meets the margin needs nothing"
+    lines = target_lines(t)
+    assert lines[-1].endswith("(+0.00 dB): no (at its PSNR it needs ≤ 17.5 ms: 2.5 ms less)")
+    hopeless = row("volsr", "VolSR S 8x", 20.0, 21.0, 8)  # below even the fastest bilinear point less the margin
+    p = check_targets(base + [hopeless])["v"]["above_bilinear"]["points"][0]
+    assert p["ms_needed"] is None and "at no time: the curve's fastest point is above 20.50 dB" in target_lines(
+        check_targets(base + [hopeless])["v"])[-1]
     fast = row("volsr", "VolSR S 4x", 5.0, 25.0, 4)  # faster than the whole curve: compared with its end
     p = check_targets(base + [fast])["v"]["above_bilinear"]["points"][0]
     assert p["outside"] and p["curve_psnr"] == 22.0 and p["met"]

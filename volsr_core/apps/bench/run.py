@@ -18,7 +18,7 @@ pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image). Quality is 
 frames after ``warmup`` warm-up frames; times are medians over the same frames of ``timing_passes``
 passes over the orbit: the scored one and ``timing_passes - 1`` more with fresh methods (their histories
 empty again), timed and not scored (the warm-up also absorbs kernel compilation). A method's time on this
-2-core machine moves by 10-30% from frame to frame (the orbit's views and the machine alike), so the median of
+2-core machine moves by 10-40% from frame to frame (the orbit's views and the machine alike), so the median of
 one pass's 8 frames moved the margins by up to 1.2 dB between runs at 1024² (docs/performance.md).
 ``ms_render`` is the ray casting, ``ms_network`` what follows it (TAAU and the network for VolSR, the bilinear or
 TAAU upscaling for those, 0 for native), ``ms_total`` their sum; ``ms_total_passes`` each pass's median.
