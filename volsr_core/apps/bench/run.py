@@ -226,14 +226,14 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
             progress.update()
     records = [{"render": [], "network": [], "readback": [], "psnr": [], "ssim": [], "passes": []} for _ in methods]
 
-    def timed(i: int, frame) -> None:
+    def timed(i: int, t: int, frame) -> None:
         rec = records[i]
         rec["render"].append(frame.ms_render)
         rec["network"].append(frame.ms_upscale)
         rec["readback"].append(frame.ms_readback)
 
     def scored(i: int, t: int, frame) -> None:
-        timed(i, frame)
+        timed(i, t, frame)
         psnr, ssim = psnr_ssim(frame.image[:height, :width], truth[t], channel_axis=-1)
         records[i]["psnr"].append(psnr)
         records[i]["ssim"].append(ssim)
@@ -247,7 +247,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
     for turn, fresh in enumerate(timing_passes, start=1):
         if [m.label for m in fresh] != [m.label for m in methods]:
             raise ValueError("a timing pass must run the scored pass's methods, in its order")
-        _one_pass(fresh, cameras, warmup, turn, lambda i, t, frame: timed(i, frame), progress)
+        _one_pass(fresh, cameras, warmup, turn, timed, progress)
         end_pass()
     rows = []
     for method, rec in zip(methods, records):
