@@ -169,6 +169,20 @@ def bilinear_ms(height: int, width: int, out_height: int, out_width: int, repeat
     return median_ms(lambda: resize_bilinear_device(image, out_width, out_height), cuda.synchronize, repeats)
 
 
+def bicubic_ms(height: int, width: int, out_height: int, out_width: int, repeats: int) -> float:
+    """Median ms of VolSR's stretch (Keys' cubic, clamped to [0, 1] in the same pass: what
+    ``Pipeline(..., stretch=k)`` runs on the device) of a ``width`` x ``height`` device image to the output size."""
+    from numba import cuda
+
+    from volsr_core.runtime.pipeline import STRETCH_CUBIC_A
+    from volsr_core.temporal.frames_cuda import resize_bicubic_device
+
+    image = cuda.to_device(np.random.default_rng(0).random((height, width, 3), dtype=np.float32))
+    return median_ms(lambda: resize_bicubic_device(image, out_width, out_height, a=STRETCH_CUBIC_A,
+                                                           clamp=(0.0, 1.0)),
+                     cuda.synchronize, repeats)
+
+
 def host_side_ms(repeats: int) -> dict[str, float]:
     """Median ms of the per-frame calls a frame on the device pays beside its kernels' work, each alone: a kernel
     launch through numba-cuda (one thread, one array argument), a new device array of two 1024² slab histories
@@ -176,6 +190,8 @@ def host_side_ms(repeats: int) -> dict[str, float]:
     about eight launches, six allocations, five uploads and two round trips a frame, native 1 spp one, two, three
     and none: set against the cast and kernel times above, they say whether pooling them can move a verdict."""
     from numba import cuda
+
+    import volsr_core.temporal.cuda  # noqa: F401  (NumPy >= 2.5: puts back np.row_stack before numba-cuda compiles)
 
     @cuda.jit
     def touch(a):
@@ -214,7 +230,8 @@ def probe_volume(spec: str, size: int, cpu_rows: list[dict], torch_device: str, 
             render = part(f"cast {lr}²", lambda: march.ms(lr, lr, False))
             after = part(f"bilinear {lr}² -> {size}²", lambda: bilinear_ms(lr, lr, size, size, repeats))
         elif row["method"] in ("taau", "volsr"):
-            lr, slabs = size // s, row.get("slabs") or 0
+            stretch = row.get("stretch") or 1  # "+ bicubic Kx": the model at s / K, its image stretched by K
+            lr, slabs, s = size // s, row.get("slabs") or 0, s // stretch
             layers = f" in {slabs} slabs" if slabs else ""
             render = part(f"cast {lr}² moving{layers}", lambda: march.ms(lr, lr, True, slabs))
             xs = row["method"] == "volsr" and row["variant"] == "XS"
@@ -225,6 +242,10 @@ def probe_volume(spec: str, size: int, cpu_rows: list[dict], torch_device: str, 
                 after = part(f"TAAU {s}x at {lr}²", lambda: post_ms(caster, cameras, lr, s, 0, None, repeats))
                 after += part(f"network {row['variant']} {s}x at {lr}²",
                               lambda: network_ms(torch, row["variant"], s, lr, lr, torch_device, repeats))
+            if stretch > 1:
+                model_size = lr * s
+                after += part(f"bicubic {model_size}² -> {size}²",
+                              lambda: bicubic_ms(model_size, model_size, size, size, repeats))
         else:
             continue
         priced.append({**row, "ms_render": round(render, 4), "ms_network": round(after, 4),

@@ -8,6 +8,7 @@ import numpy as np
 
 from volsr_core.atomic import atomic_write
 from volsr_core.images import to_uint8
+from volsr_core.render.device import channels
 from volsr_core.render.layout import (
     OUT_ALPHA, OUT_CHANNELS, OUT_COLOR, OUT_DEPTH, OUT_MAX_RGBA, OUT_MOTION, OUT_MOTION_DEPTH, OUT_POSITION,
     SLAB_CHANNELS,
@@ -83,31 +84,31 @@ class FeatureFrame:
 
     @property
     def color(self) -> np.ndarray:
-        return self.data[:, :, OUT_COLOR:OUT_COLOR + 3]
+        return channels(self.data, OUT_COLOR, OUT_COLOR + 3)
 
     @property
     def alpha(self) -> np.ndarray:
-        return self.data[:, :, OUT_ALPHA]
+        return channels(self.data, OUT_ALPHA)
 
     @property
     def depth(self) -> np.ndarray:
-        return self.data[:, :, OUT_DEPTH]
+        return channels(self.data, OUT_DEPTH)
 
     @property
     def max_rgba(self) -> np.ndarray:
-        return self.data[:, :, OUT_MAX_RGBA:OUT_MAX_RGBA + 4]
+        return channels(self.data, OUT_MAX_RGBA, OUT_MAX_RGBA + 4)
 
     @property
     def position(self) -> np.ndarray:
-        return self.data[:, :, OUT_POSITION:OUT_POSITION + 3]
+        return channels(self.data, OUT_POSITION, OUT_POSITION + 3)
 
     @property
     def motion(self) -> np.ndarray:
-        return self.data[:, :, OUT_MOTION:OUT_MOTION + 2]
+        return channels(self.data, OUT_MOTION, OUT_MOTION + 2)
 
     @property
     def motion_depth(self) -> np.ndarray:
-        return self.data[:, :, OUT_MOTION_DEPTH]
+        return channels(self.data, OUT_MOTION_DEPTH)
 
     def to_uint8(self) -> np.ndarray:
         """The colour as an (H, W, 3) uint8 image, ready for PNG."""
