@@ -59,7 +59,7 @@ def resize(module, kernel: str, frame: np.ndarray, size: int) -> np.ndarray:
     """``frame`` stretched to ``size``² by ``module``'s kernel (an earlier commit's bicubic took no clamp: clipped)."""
     if kernel == "bilinear":
         return module.resize_bilinear(frame, size, size)
-    return np.clip(module.resize_bicubic(frame, size, size, a=-0.75), 0.0, 1.0)
+    return module.resize_bicubic(frame, size, size, a=-0.75, clamp=(0.0, 1.0))  # clamped in the same pass, as VolSR
 
 
 if __name__ == "__main__":

@@ -34,7 +34,8 @@ def test_upscaling_matches_torch_interpolate(scale):
         np.testing.assert_allclose(ours, theirs[0].permute(1, 2, 0).numpy(), atol=1e-5)
 
 
-@pytest.mark.parametrize("sizes", [((11, 13), (29, 17)), ((6, 4), (6, 4)), ((16, 20), (5, 7)), ((1, 3), (4, 9))])
+@pytest.mark.parametrize("sizes", [((11, 13), (29, 17)), ((6, 4), (6, 4)), ((16, 20), (5, 7)), ((1, 3), (4, 9)),
+                                   ((5, 1), (10, 2)), ((3, 2), (7, 4))])
 def test_resizing_to_any_size_matches_torch_interpolate_and_clamps_in_the_same_pass(sizes):
     """The separable kernels (along rows, then down columns) at ratios up, none, down and mixed, one or three channels:
     PyTorch's interpolate to the same size; ``clamp`` gives ``np.clip`` of the unclamped result, where bicubic's
@@ -55,3 +56,24 @@ def test_resizing_to_any_size_matches_torch_interpolate_and_clamps_in_the_same_p
         if (height, width) == (29, 17):
             assert unclamped.min() < 0.0 or unclamped.max() > 1.0, "an upscale that overshoots: the clamp is tested"
     assert resize_bilinear(image[..., 0], width, height).shape == (height, width), "an (h, w) image stays 2D"
+
+
+@pytest.mark.parametrize("cubic", [False, True])
+def test_a_doubled_rgb_row_slides_its_window_to_the_gathered_taps_sums(cubic):
+    """VolSR's 2x stretch and the baseline's 1/2 size: an RGB row doubled in width takes its taps from one sliding
+    window (``_across_row_doubled``) instead of gathering each output's; the same sums as the gathers, edges too,
+    and other ratios and channel counts keep the gathers."""
+    from volsr_core.temporal import resample
+
+    image = np.random.default_rng(3).random((9, 12, 3), dtype=np.float32)
+    phase_w = resample._doubling_weights(12, 24, cubic, -0.75)
+    assert phase_w.shape == (2, 4 if cubic else 2)
+    assert resample._doubling_weights(12, 36, cubic, -0.75).shape[0] == 0
+    out = {}
+    for name, weights in (("window", phase_w), ("gathers", phase_w[:0])):
+        out[name] = np.empty((20, 24, 3), np.float32)
+        resample._resample_kernel(image, *resample._axis_taps(9, 20, cubic, -0.75),
+                                  *resample._axis_taps(12, 24, cubic, -0.75), weights, np.float32(-10.0),
+                                  np.float32(10.0), out[name])
+    np.testing.assert_allclose(out["window"], out["gathers"], atol=2e-7)
+    assert np.abs(out["window"] - out["window"].mean()).max() > 0.1

@@ -30,7 +30,7 @@ from volsr_core.temporal.taau import TemporalUpsampler, checked_jitter  # noqa: 
 _STAGES = build_temporal_stages(cuda.jit(device=True, inline=True))
 _to_ycocg32, _sample_window, _splat_weights = _STAGES.to_ycocg32, _STAGES.sample_window, _STAGES.splat_weights
 _catmull_rom_weights, _history_column = _STAGES.catmull_rom_weights, _STAGES.history_column
-_mix, _taps, _clamp_to_ycocg_box = _STAGES.catmull_rom_mix, _STAGES.bilinear_taps, _STAGES.clamp_to_ycocg_box
+_mix, _taps, _clamp_to_ycocg_bounds = _STAGES.catmull_rom_mix, _STAGES.bilinear_taps, _STAGES.clamp_to_ycocg_bounds
 _nearest_depth, _history_weight = _STAGES.nearest_depth, _STAGES.history_weight
 
 THREADS = (16, 8)
@@ -133,7 +133,8 @@ def _taau_pixels(history, has_history, lr, motion, depth, box, scale, jx, jy, in
                               _history_column(history, ix, rows, ay), _history_column(history, ix1, rows, ay),
                               _history_column(history, min(ix + 2, hr_w - 1), rows, ay))
             if rectify:  # 5. clamp into the YCoCg box of the 3x3 LR neighbourhood
-                h0, h1, h2 = _clamp_to_ycocg_box(h0, h1, h2, box, ly, lx)
+                h0, h1, h2 = _clamp_to_ycocg_bounds(h0, h1, h2, box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2],
+                                                    box[ly, lx, 3], box[ly, lx, 4], box[ly, lx, 5])
     # 7. blend
     if n > 0.0:
         share = 1.0 / (n + a)

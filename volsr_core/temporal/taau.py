@@ -53,7 +53,7 @@ from volsr_core.temporal.stages import CPU_STAGES
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
 _to_ycocg32, _row_window, _splat_weights = CPU_STAGES.to_ycocg32, CPU_STAGES.sample_window, CPU_STAGES.splat_weights
 _catmull_rom_weights, _history_column = CPU_STAGES.catmull_rom_weights, CPU_STAGES.history_column
-_mix, _rectify = CPU_STAGES.catmull_rom_mix, CPU_STAGES.clamp_to_ycocg_box
+_mix, _rectify = CPU_STAGES.catmull_rom_mix, CPU_STAGES.clamp_to_ycocg_bounds
 _nearest_depth, _history_weight = CPU_STAGES.nearest_depth, CPU_STAGES.history_weight
 STILL_BELOW = 1e-6  # degrees: a view rotating less than this between frames is still (a still camera, a pan, a zoom)
 
@@ -139,6 +139,8 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))
         ay = _catmull_rom_weights(ty)
         gated = disocclusion > 0.0 and box[ly, lx, 6] > 0.5
+        lo0, lo1, lo2, hi0, hi1, hi2 = box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2], box[ly, lx, 3], box[ly, lx, 4], \
+            box[ly, lx, 5]
         last_ix = -2
         k0 = k1 = k2 = k3 = (np.float32(0.0), np.float32(0.0), np.float32(0.0))  # the four columns' RGB
         for x in range(runs[lx], runs[lx + 1]):
@@ -175,7 +177,7 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                     last_ix = ix
                     h0, h1, h2 = _mix(_catmull_rom_weights(tx), k0, k1, k2, k3)
                     if rectify:  # 5. clamp into the YCoCg box of the 3x3 LR neighbourhood
-                        h0, h1, h2 = _rectify(h0, h1, h2, box, ly, lx)
+                        h0, h1, h2 = _rectify(h0, h1, h2, lo0, lo1, lo2, hi0, hi1, hi2)
             # 7. blend
             if n > 0.0:
                 inv = 1.0 / (n + a)
