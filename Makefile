@@ -54,7 +54,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_renderer.py
 
 ## numba caches kernels on disk keyed by the file that defines the kernel: after editing a file a
-## kernel inlines from (render/stages.py, temporal/color.py), clear them
+## kernel inlines from (render/stages.py, temporal/stages.py, temporal/color.py), clear them: make clean
 clean:
 	rm -rf out .pytest_cache
 	find volsr_core -name '*.nbi' -o -name '*.nbc' | xargs -r rm -f
