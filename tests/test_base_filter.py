@@ -18,7 +18,7 @@ from volsr_core.errors import InputError  # noqa: E402
 from volsr_core.io import make_phantom  # noqa: E402
 from volsr_core.render.features import FeatureFrame  # noqa: E402
 from volsr_core.render.layout import OUT_CHANNELS  # noqa: E402
-from volsr_core.runtime.base_filter import FILTER_KEY, Scratch, filter_image  # noqa: E402
+from volsr_core.runtime.base_filter import BAND_ROWS, FILTER_KEY, Scratch, filter_image  # noqa: E402
 from volsr_core.runtime.engines import OnnxEngine, TorchEngine  # noqa: E402
 from volsr_core.runtime.export import example_inputs, export_onnx  # noqa: E402
 from volsr_core.runtime.models import model_file  # noqa: E402
@@ -58,6 +58,28 @@ def test_the_cpu_kernel_computes_what_the_network_filter_does(kernel, orientatio
     assert weights.shape == (orientations, 3, kernel, kernel) and bias.shape == (orientations, 3)
     got = filter_image(image[0].numpy().transpose(1, 2, 0), weights, bias)
     assert got.shape == (37, 29, 3) and np.abs(got - expected).max() < 1e-5
+
+
+@pytest.mark.parametrize("orientations", [1, 2])
+def test_the_kernel_filters_band_by_band_and_sums_once_where_a_row_end_is_one_colour(orientations):
+    """An image several bands tall (the last one short) with the background either side of a volume: one colour on
+    the left, another on the right, a black top; where every tap of a pixel reads one colour the kernel sums once per
+    row end, elsewhere each pixel: against the network's filter everywhere, band edges and flat ends included."""
+    g = torch.Generator().manual_seed(3 + orientations)
+    layer = BaseFilter(5, orientations)
+    height, width = 2 * BAND_ROWS + 11, 61
+    with torch.no_grad():
+        layer.conv.weight.copy_(torch.randn(layer.conv.weight.shape, generator=g))
+        layer.conv.bias.copy_(torch.randn(layer.conv.bias.shape, generator=g))
+        image = torch.nn.functional.interpolate(torch.rand(1, 3, 9, 7, generator=g), size=(height, width),
+                                                mode="bicubic")
+        image[..., :, :17] = torch.tensor([0.2, 0.4, 0.9]).view(1, 3, 1, 1)
+        image[..., :, 40:] = torch.tensor([0.7, 0.1, 0.0]).view(1, 3, 1, 1)
+        image[..., :BAND_ROWS + 3, :] = 0.0
+        image[..., BAND_ROWS + 20, 30] = 1.5  # one bright pixel, clipped
+        expected = layer(torch.clamp(image, 0, 1))[0].numpy().transpose(1, 2, 0)
+    got = filter_image(image[0].numpy().transpose(1, 2, 0), *(w.numpy() for w in layer.weights()))
+    assert np.abs(got - expected).max() < 1e-5
 
 
 @pytest.mark.parametrize("overrides, expected", [({}, (9, 1)), ({"base_kernel": 5, "base_orientations": 2}, (5, 2))])

@@ -248,7 +248,9 @@ def test_the_history_is_the_catmull_rom_fetch_at_the_reprojected_position_clampe
     """Per HR pixel, against the reference stages of temporal.color: the kernel's reprojected history
     (it slides its Catmull-Rom columns along the HR pixels of one LR sample) equals a 4x4 Catmull-Rom
     fetch of the previous history at (x, y) + scale * motion of the nearest LR sample, clamped into the
-    YCoCg min/max box of that sample's 3x3 neighbourhood; image edges included."""
+    YCoCg min/max box of that sample's 3x3 neighbourhood; image edges included. Parts of the frame are one colour
+    (black, as the background around a volume, and another), where the kernel takes the box's colour without the
+    fetch: the same values."""
     n = 9
     rng = np.random.default_rng(21)
     up = TemporalUpsampler(scale)
@@ -256,13 +258,15 @@ def test_the_history_is_the_catmull_rom_fetch_at_the_reprojected_position_clampe
     up(rng.random((n, n, 3), dtype=np.float32), still, (0.0, 0.0), rotation=0.0)
     previous = up.history[..., :3].copy()
     lr = rng.random((n, n, 3), dtype=np.float32)
+    lr[:, :3] = 0.0
+    lr[5:, 5:] = (0.2, 0.5, 0.7)
     motion = rng.uniform(-1.5, 1.5, (n, n, 2)).astype(np.float32)
     motion[:, : n // 2] = motion[0, 0]  # runs of LR samples with equal motion, too
     jitter = (0.3, -0.2)
     up(lr, motion, jitter, rotation=0.0)
     ycocg = image_to_ycocg(lr)
     hr = n * scale
-    checked = 0
+    checked = flat = 0
     for y in range(hr):
         ly = min(max(int(np.floor((y + 0.5) / scale - 0.5 - jitter[1] + 0.5)), 0), n - 1)
         for x in range(hr):
@@ -277,7 +281,8 @@ def test_the_history_is_the_catmull_rom_fetch_at_the_reprojected_position_clampe
             expected = to_rgb(*clip_to_box(to_ycocg(*fetched), lo, hi, False))
             np.testing.assert_allclose(up.last_aux[y, x, :3], expected, atol=2e-6)
             checked += 1
-    assert checked > hr * hr // 2
+            flat += bool(np.all(lo == hi))
+    assert checked > hr * hr // 2 and flat > hr * hr // 8
 
 
 # -- fine sampling: the bilinear blend and the shorter history -------------------------------------

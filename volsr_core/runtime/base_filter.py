@@ -5,12 +5,16 @@ variant XS) is one depthwise k x k convolution of the base clipped to [0, 1], ed
 past the border, or a pair of them, each pixel taking the one its local orientation picks
 (:func:`~volsr_core.sr.network.second_orientation`, the same stages here). :func:`filter_image` does it
 on images laid out as TAAU makes them, so the upscaler needs no network inputs and no transposes for
-it: one pass lays the clipped, padded channels apart, a second sums each pixel's taps row by row (the
-tap count compiled in, so the taps unroll and the pixels vectorise; a pair sums both filters in the same
-pass and blends) and interleaves the result; work buffers stay in a :class:`Scratch` between frames. On
-TAAU's 512² estimates (2 cores, medians, ``benchmarks/bench_base_filter.py``): 1.6 ms for the 5x5 pair of XS
-2x and for a 9x9 filter (XS 4x's until 2026-11-25, now 5x5: 1.1 ms; docs/network.md), where onnxruntime's
-depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9), on a faster machine, without its transposes. The weights
+it: a thread takes a band of :data:`BAND_ROWS` rows, lays its clipped, padded channels apart and sums each
+pixel's taps row by row (the tap count compiled in, so the taps unroll and the pixels vectorise; a pair finds
+each row's orientations from the same band, sums both filters in the same pass and blends) and interleaves the
+result; where every tap of a pixel reads one colour (the background either side of a volume: 65-85% of a bench
+frame's pixels) the sum is one constant per row end and channel, computed once. Work buffers stay in a
+:class:`Scratch` between frames. On TAAU's 512² estimates (2 cores, medians, ``benchmarks/bench_base_filter.py``):
+1.6 ms for the 5x5 pair of XS 2x and for a 9x9 filter (XS 4x's until 2026-11-25, now 5x5: 1.1 ms;
+docs/network.md), where onnxruntime's depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9), on a faster machine,
+without its transposes; the bands and the constant ends took 0.76-0.90 of the time of whole-image passes for one
+filter and 0.84-1.01 for a pair (512² and 1024², CT_AVM and MR_Gd, ``--against`` the commit before them). The weights
 travel in the ONNX file's metadata (:data:`FILTER_KEY`, written by
 :func:`~volsr_core.runtime.export.export_onnx`); the graph stays the reference the kernel is tested against.
 """
@@ -48,126 +52,227 @@ class Scratch:
         return buffer
 
 
-@numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
-def _padded_planes(image: np.ndarray, r: int, planes: np.ndarray) -> None:
-    """``planes`` (C, H + 2r, W + 2r) from ``image`` (H, W, C): clipped to [0, 1], channels apart, edge
-    pixels repeated."""
-    height, width, channels = image.shape
-    for y in numba.prange(height + 2 * r):
-        sy = min(max(y - r, 0), height - 1)
-        for x in range(width + 2 * r):
-            sx = min(max(x - r, 0), width - 1)
-            for c in range(channels):
-                planes[c, y, x] = min(max(image[sy, sx, c], np.float32(0.0)), np.float32(1.0))
-
-
-@numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
-def _second_orientation(planes: np.ndarray, pad: int, luma_weights: np.ndarray, taps: np.ndarray,
-                        luma: np.ndarray, across: np.ndarray, second: np.ndarray) -> None:
-    """``second`` (H, W) uint8, 1 where a filter pair uses its second filter, from ``planes``
-    (:func:`_padded_planes` with ``pad`` >= 1; ``luma`` and ``across`` are work buffers of the padded and
-    the image's size): the stages of :func:`~volsr_core.sr.network.second_orientation` (luma of the clipped
-    image, central differences, their product smoothed along x, then y, edge pixels repeated at each step,
-    negative), laid out so that the inner loops need no index clamps (they vectorise)."""
-    channels, padded_height, padded_width = planes.shape
-    height, width = padded_height - 2 * pad, padded_width - 2 * pad
-    r = taps.shape[0] // 2
-    for y in numba.prange(padded_height):
-        row = luma[y]
-        row[:] = luma_weights[0] * planes[0, y]
-        for c in range(1, channels):
-            weight, source = luma_weights[c], planes[c, y]
-            for x in range(padded_width):
-                row[x] += weight * source[x]
-    for y in numba.prange(height):
-        here, up, down = luma[y + pad], luma[y + pad - 1], luma[y + pad + 1]
-        product = np.empty(width + 2 * r, np.float32)  # r repeated edge values each side
-        for x in range(width):
-            product[x + r] = (np.float32(0.5) * (here[x + pad + 1] - here[x + pad - 1]) * np.float32(0.5)
-                              * (down[x + pad] - up[x + pad]))
-        for i in range(r):
-            product[i], product[width + r + i] = product[r], product[width + r - 1]
-        out = across[y]
-        out[:] = np.float32(0.0)
-        for i in range(taps.shape[0]):
-            tap = taps[i]
-            for x in range(width):
-                out[x] += tap * product[x + i]
-    for y in numba.prange(height):
-        smoothed = np.zeros(width, np.float32)
-        for i in range(taps.shape[0]):
-            tap, source = taps[i], across[min(max(y + i - r, 0), height - 1)]
-            for x in range(width):
-                smoothed[x] += tap * source[x]
-        for x in range(width):
-            second[y, x] = smoothed[x] < 0
-
-
+BAND_ROWS = 32
+"""Output rows a thread filters from one band of padded planes: a band's planes, luma and sums stay in the core's
+L2 at 1024² wide (about 1 MB), where whole-image planes went to memory between the passes (one 5x5 filter on random
+images, 16 to 64 rows alike: 0.62-0.90 of the time at 1024² in two runs, 0.82 at 512²)."""
+_NB = dict(fastmath=True, error_model="numpy", boundscheck=False, cache=True)
 _FLOAT32_MAX = np.finfo(np.float32).max
 
 
-@functools.lru_cache(maxsize=None)
-def _filter_rows(taps: int) -> Callable:
-    """The kernel for one filter of ``taps`` x ``taps`` (compiled once per size, cached on disk):
-    ``rows(planes, weights, bias, low, high, out)`` fills ``out`` (H, W, C) from ``planes`` (:func:`_padded_planes`)
-    through ``weights`` (1, C, k, k) and ``bias`` (1, C), a row and a channel at a time: per tap row, each pixel's
-    ``taps`` products summed in registers into a row accumulator (the tap count a compile-time constant, so the
-    taps unroll and the pixels vectorise: 1.7 times as fast at 9 taps as a pass per tap over the row), then
-    clamped to [``low``, ``high``] and interleaved into ``out``."""
-
-    @numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
-    def rows(planes, weights, bias, low, high, out):
-        height, width, channels = out.shape
-        for y in numba.prange(height):
-            total = np.empty(width, np.float32)
-            for c in range(channels):
-                total[:] = bias[0, c]
-                for dy in range(taps):
-                    source = planes[c, y + dy]
-                    row = weights[0, c, dy]
-                    for x in range(width):
-                        value = total[x]
-                        for dx in range(taps):
-                            value += row[dx] * source[x + dx]
-                        total[x] = value
-                for x in range(width):
-                    out[y, x, c] = min(max(total[x], low), high)
-
-    return rows
-
-
-@functools.lru_cache(maxsize=None)
-def _filter_rows_pair(taps: int) -> Callable:
-    """:func:`_filter_rows` for a pair (``rows(planes, weights, bias, second, low, high, out)``, ``weights``
-    (2, C, k, k), ``bias`` (2, C)): both filters summed in the same pass (one load, two products), then each pixel
-    takes filter ``second[y, x]`` by a blend with weight 0 or 1 (no branch, so it vectorises too)."""
-
-    @numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
-    def rows(planes, weights, bias, second, low, high, out):
-        height, width, channels = out.shape
-        for y in numba.prange(height):
-            first = np.empty(width, np.float32)
-            other = np.empty(width, np.float32)
-            pick = np.empty(width, np.float32)
+@numba.njit(**_NB)
+def _fill_band(image: np.ndarray, first: int, pad: int, planes: np.ndarray, rows: int) -> None:
+    """The first ``rows`` rows of a band's ``planes`` (C, >= rows, W + 2 ``pad``): image rows ``first`` + j (edge
+    rows repeated past the image), clipped to [0, 1], channels apart, ``pad`` edge pixels repeated each side."""
+    height, width, channels = image.shape
+    for j in range(rows):
+        source = image[min(max(first + j, 0), height - 1)]
+        for c in range(channels):
+            row = planes[c, j]
+            left = min(max(source[0, c], np.float32(0.0)), np.float32(1.0))
+            right = min(max(source[width - 1, c], np.float32(0.0)), np.float32(1.0))
+            for x in range(pad):
+                row[x], row[width + pad + x] = left, right
             for x in range(width):
-                pick[x] = second[y, x]
-            for c in range(channels):
-                first[:] = bias[0, c]
-                other[:] = bias[1, c]
-                for dy in range(taps):
-                    source = planes[c, y + dy]
-                    row, row_other = weights[0, c, dy], weights[1, c, dy]
-                    for x in range(width):
-                        value, value_other = first[x], other[x]
-                        for dx in range(taps):
-                            tap = source[x + dx]
-                            value += row[dx] * tap
-                            value_other += row_other[dx] * tap
-                        first[x], other[x] = value, value_other
-                for x in range(width):
-                    out[y, x, c] = min(max(first[x] + pick[x] * (other[x] - first[x]), low), high)
+                row[x + pad] = min(max(source[x, c], np.float32(0.0)), np.float32(1.0))
 
-    return rows
+
+@numba.njit(**_NB)
+def _flat_ends(planes: np.ndarray, rows: int, ends: np.ndarray) -> None:
+    """Per row j < ``rows`` of a band's ``planes`` (C, >= rows, PW): ``ends[j, 0]`` the count of its leading columns
+    equal, in every channel, to its first; ``ends[j, 1]`` the first column of its trailing run equal to its last
+    (the background either side of a volume, mostly). Found as a least and a greatest index over the whole row, a
+    reduction that vectorises (0.1 against 0.7 ms for 512² by scanning in from the ends column by column)."""
+    channels, width = planes.shape[0], planes.shape[2]
+    for j in range(rows):
+        first_differing, last_differing = width, -1
+        for c in range(channels):
+            row = planes[c, j]
+            left, right = row[0], row[width - 1]
+            for x in range(width):
+                first_differing = min(first_differing, x if row[x] != left else width)
+                last_differing = max(last_differing, x if row[x] != right else -1)
+        ends[j, 0], ends[j, 1] = first_differing, last_differing + 1
+
+
+@numba.njit(**_NB)
+def _sums_needed(planes: np.ndarray, ends: np.ndarray, j0: int, taps: int, width: int) -> tuple[int, int]:
+    """Output columns [start, stop) of the row whose taps read band rows ``j0`` .. ``j0 + taps - 1`` (``ends`` from
+    :func:`_flat_ends`) that need their sums: left of ``start`` every tap reads the colour of row ``j0``'s first
+    column, from ``stop`` on that of its last, so each of those pixels is one constant per channel."""
+    last = planes.shape[2] - 1
+    left, right = last + 1, 0
+    for j in range(j0, j0 + taps):
+        left, right = min(left, ends[j, 0]), max(right, ends[j, 1])
+        if not _same_rows(planes, j, j0, 0):
+            left = 0
+        if not _same_rows(planes, j, j0, last):
+            right = last + 1
+    start = min(max(left - taps + 1, 0), width)
+    return start, max(min(right, width), start)
+
+
+@numba.njit(**_NB)
+def _same_rows(planes: np.ndarray, j: int, j_other: int, x: int) -> bool:
+    """Whether rows ``j`` and ``j_other`` of ``planes`` (C, rows, PW) hold the same colour in column ``x``."""
+    for c in range(planes.shape[0]):
+        if planes[c, j, x] != planes[c, j_other, x]:
+            return False
+    return True
+
+
+@numba.njit(**_NB)
+def _constant_sum(weights: np.ndarray, bias: np.ndarray, m: int, c: int, value: np.float32) -> np.float32:
+    """Filter ``m`` of channel ``c`` (``weights`` (n, C, k, k), ``bias`` (n, C)) on a patch of one ``value``, summed in
+    the kernels' order."""
+    total = bias[m, c]
+    for dy in range(weights.shape[2]):
+        for dx in range(weights.shape[3]):
+            total += weights[m, c, dy, dx] * value
+    return total
+
+
+@numba.njit(**_NB)
+def _band_orientation(planes: np.ndarray, y0: int, y1: int, height: int, halo: int, pad: int,
+                      luma_weights: np.ndarray, smoothing: np.ndarray, luma: np.ndarray, across: np.ndarray,
+                      product: np.ndarray) -> None:
+    """For output rows ``y0`` .. ``y1`` - 1 of an image ``height`` rows tall, the stages of
+    :func:`~volsr_core.sr.network.second_orientation` up to the vertical smoothing, from a band's ``planes``
+    (:func:`_fill_band` from row ``y0 - halo``, ``halo`` >= r + 1 for ``smoothing``'s radius r): ``luma`` of
+    the planes' rows, and in ``across`` row i the product of central differences of image row clamp(y0 - r + i),
+    smoothed along x (edge values repeated); ``product`` is a work row of W + 2r. The vertical smoothing reads
+    ``across`` rows y - y0 .. y - y0 + 2r for row y (rows past the image repeat its edge rows, as the network)."""
+    r = smoothing.shape[0] // 2
+    padded_width = planes.shape[2]
+    width = padded_width - 2 * pad
+    used = y1 - y0 + 2 * halo
+    for j in range(used):
+        row = luma[j]
+        row[:] = luma_weights[0] * planes[0, j]
+        for c in range(1, planes.shape[0]):
+            weight, source = luma_weights[c], planes[c, j]
+            for x in range(padded_width):
+                row[x] += weight * source[x]
+    for i in range(y1 - y0 + 2 * r):
+        j = min(max(y0 - r + i, 0), height - 1) - y0 + halo  # that image row's row in the band
+        here, up, down = luma[j], luma[j - 1], luma[j + 1]
+        for x in range(width):
+            product[x + r] = (np.float32(0.5) * (here[x + pad + 1] - here[x + pad - 1]) * np.float32(0.5)
+                              * (down[x + pad] - up[x + pad]))
+        for k in range(r):
+            product[k], product[width + r + k] = product[r], product[width + r - 1]
+        out = across[i]
+        out[:width] = np.float32(0.0)
+        for k in range(smoothing.shape[0]):
+            tap = smoothing[k]
+            for x in range(width):
+                out[x] += tap * product[x + k]
+
+
+@functools.lru_cache(maxsize=None)
+def _filter_bands(taps: int) -> Callable:
+    """The kernel for one filter of ``taps`` x ``taps`` (compiled once per size, cached on disk):
+    ``bands(image, weights, bias, low, high, planes, ends, total, out)`` fills ``out`` (H, W, C) from ``image``
+    (H, W, C) through ``weights`` (1, C, k, k) and ``bias`` (1, C), :data:`BAND_ROWS` rows per band (``planes``
+    (bands, C, BAND_ROWS + k - 1, W + k - 1), ``ends`` (bands, BAND_ROWS + k - 1, 2) int64 and ``total``
+    (bands, W) its work buffers): the band's clipped, padded planes (:func:`_fill_band`) and their rows' flat ends
+    (:func:`_flat_ends`), then per row and channel, per tap row, each pixel's ``taps`` products summed in registers
+    into a row accumulator (the tap count a compile-time constant, so the taps unroll and the pixels vectorise:
+    1.7 times as fast at 9 taps as a pass per tap over the row) between the row's flat ends
+    (:func:`_sums_needed`; one constant each side), clamped to [``low``, ``high``] and interleaved into ``out``."""
+    pad = taps // 2
+
+    @numba.njit(parallel=True, **_NB)
+    def bands(image, weights, bias, low, high, planes, ends, total, out):
+        height, width, channels = out.shape
+        last = planes.shape[3] - 1
+        for b in numba.prange(planes.shape[0]):
+            y0 = b * BAND_ROWS
+            y1 = min(y0 + BAND_ROWS, height)
+            band, row_total = planes[b], total[b]
+            _fill_band(image, y0 - pad, pad, band, y1 - y0 + 2 * pad)
+            _flat_ends(band, y1 - y0 + 2 * pad, ends[b])
+            for y in range(y0, y1):
+                start, stop = _sums_needed(band, ends[b], y - y0, taps, width)
+                for c in range(channels):
+                    # views from ``start``: indices that cannot be negative need no wraparound, so the loop
+                    # vectorises (over range(start, stop) it did not: 5 times the time)
+                    summed = row_total[start:stop]
+                    summed[:] = bias[0, c]
+                    for dy in range(taps):
+                        source = band[c, y - y0 + dy, start:]
+                        row = weights[0, c, dy]
+                        for x in range(stop - start):
+                            value = summed[x]
+                            for dx in range(taps):
+                                value += row[dx] * source[x + dx]
+                            summed[x] = value
+                    row_total[:start] = _constant_sum(weights, bias, 0, c, band[c, y - y0, 0])
+                    row_total[stop:] = _constant_sum(weights, bias, 0, c, band[c, y - y0, last])
+                    for x in range(width):
+                        out[y, x, c] = min(max(row_total[x], low), high)
+
+    return bands
+
+
+@functools.lru_cache(maxsize=None)
+def _filter_bands_pair(taps: int) -> Callable:
+    """:func:`_filter_bands` for a pair (``bands(image, weights, bias, luma_weights, smoothing, low, high, planes,
+    ends, luma, across, work, out)``, ``weights`` (2, C, k, k), ``bias`` (2, C); per band, ``planes`` (C,
+    BAND_ROWS + 2 * halo, W + k - 1) with halo = max(k // 2, r + 1) for ``smoothing``'s radius r, ``ends`` of its
+    rows, ``luma`` of the planes' rows, ``across`` (BAND_ROWS + 2r, W) and ``work`` (4, W + 2r)): the band's
+    orientation stages
+    (:func:`_band_orientation`), then per row the vertical smoothing's sign, and both filters summed in the same
+    pass (one load, two products), each pixel taking filter ``second`` by a blend with weight 0 or 1 (no branch,
+    so it vectorises too)."""
+    pad = taps // 2
+
+    @numba.njit(parallel=True, **_NB)
+    def bands(image, weights, bias, luma_weights, smoothing, low, high, planes, ends, luma, across, work, out):
+        height, width, channels = out.shape
+        r = smoothing.shape[0] // 2
+        halo = max(pad, r + 1)
+        last = planes.shape[3] - 1
+        for b in numba.prange(planes.shape[0]):
+            y0 = b * BAND_ROWS
+            y1 = min(y0 + BAND_ROWS, height)
+            band = planes[b]
+            first, other, pick = work[b, 1], work[b, 2], work[b, 3]
+            _fill_band(image, y0 - halo, pad, band, y1 - y0 + 2 * halo)
+            _flat_ends(band, y1 - y0 + 2 * halo, ends[b])
+            _band_orientation(band, y0, y1, height, halo, pad, luma_weights, smoothing, luma[b], across[b],
+                              work[b, 0])
+            for y in range(y0, y1):
+                pick[:width] = np.float32(0.0)
+                for k in range(smoothing.shape[0]):
+                    tap, source = smoothing[k], across[b, y - y0 + k]
+                    for x in range(width):
+                        pick[x] += tap * source[x]
+                for x in range(width):
+                    pick[x] = np.float32(1.0) if pick[x] < 0 else np.float32(0.0)
+                j0 = y - y0 + halo - pad  # the band row of the first tap row
+                start, stop = _sums_needed(band, ends[b], j0, taps, width)
+                for c in range(channels):
+                    summed, summed_other = first[start:stop], other[start:stop]  # as in _filter_bands
+                    summed[:] = bias[0, c]
+                    summed_other[:] = bias[1, c]
+                    for dy in range(taps):
+                        source = band[c, j0 + dy, start:]
+                        row, row_other = weights[0, c, dy], weights[1, c, dy]
+                        for x in range(stop - start):
+                            value, value_other = summed[x], summed_other[x]
+                            for dx in range(taps):
+                                tap = source[x + dx]
+                                value += row[dx] * tap
+                                value_other += row_other[dx] * tap
+                            summed[x], summed_other[x] = value, value_other
+                    for end, (lo, hi) in ((band[c, j0, 0], (0, start)), (band[c, j0, last], (stop, width))):
+                        first[lo:hi] = _constant_sum(weights, bias, 0, c, end)
+                        other[lo:hi] = _constant_sum(weights, bias, 1, c, end)
+                    for x in range(width):
+                        out[y, x, c] = min(max(first[x] + pick[x] * (other[x] - first[x]), low), high)
+
+    return bands
 
 
 def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
@@ -180,21 +285,28 @@ def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
     scratch = Scratch() if scratch is None else scratch
     image = np.ascontiguousarray(image, dtype=np.float32)
     weights = np.ascontiguousarray(weights, dtype=np.float32)
-    height, width = image.shape[:2]
-    pad = weights.shape[2] // 2
-    planes = scratch.get("planes", (3, height + 2 * pad, width + 2 * pad))
-    _padded_planes(image, pad, planes)
     bias = np.asarray(bias, dtype=np.float32)
+    height, width, channels = image.shape
+    pad = weights.shape[2] // 2
+    n_bands = -(-height // BAND_ROWS)
     out = np.empty(image.shape, np.float32)
     # the kernels clamp as they write ``out``; unclipped, to finite bounds (their fastmath assumes no infinities)
     low, high = (np.float32(0.0), np.float32(1.0)) if clip_output else (-_FLOAT32_MAX, _FLOAT32_MAX)
     if weights.shape[0] > 1:
-        second = scratch.get("second", (height, width), np.uint8)
-        _second_orientation(planes, pad, LUMA, SMOOTHING, scratch.get("luma", planes.shape[1:]),
-                            scratch.get("across", (height, width)), second)
-        _filter_rows_pair(weights.shape[2])(planes, weights, bias, second, low, high, out)
+        r = SMOOTHING.shape[0] // 2
+        rows = BAND_ROWS + 2 * max(pad, r + 1)
+        planes = scratch.get("planes", (n_bands, channels, rows, width + 2 * pad))
+        luma = scratch.get("luma", (n_bands, rows, width + 2 * pad))
+        across = scratch.get("across", (n_bands, BAND_ROWS + 2 * r, width))
+        work = scratch.get("work", (n_bands, 4, width + 2 * r))
+        ends = scratch.get("ends", (n_bands, rows, 2), np.int64)
+        _filter_bands_pair(weights.shape[2])(image, weights, bias, LUMA, SMOOTHING, low, high, planes, ends, luma,
+                                             across, work, out)
     else:
-        _filter_rows(weights.shape[2])(planes, weights, bias, low, high, out)
+        planes = scratch.get("planes", (n_bands, channels, BAND_ROWS + 2 * pad, width + 2 * pad))
+        total = scratch.get("total", (n_bands, width))
+        ends = scratch.get("ends", (n_bands, BAND_ROWS + 2 * pad, 2), np.int64)
+        _filter_bands(weights.shape[2])(image, weights, bias, low, high, planes, ends, total, out)
     return out
 
 

@@ -52,6 +52,7 @@ from volsr_core.temporal.stages import CPU_STAGES
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
 _to_ycocg32, _row_window, _splat_weights = CPU_STAGES.to_ycocg32, CPU_STAGES.sample_window, CPU_STAGES.splat_weights
+_to_rgb = CPU_STAGES.to_rgb
 _catmull_rom_weights, _history_column = CPU_STAGES.catmull_rom_weights, CPU_STAGES.history_column
 _mix, _rectify = CPU_STAGES.catmull_rom_mix, CPU_STAGES.clamp_to_ycocg_bounds
 _nearest_depth, _history_weight = CPU_STAGES.nearest_depth, CPU_STAGES.history_weight
@@ -141,6 +142,10 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         gated = disocclusion > 0.0 and box[ly, lx, 6] > 0.5
         lo0, lo1, lo2, hi0, hi1, hi2 = box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2], box[ly, lx, 3], box[ly, lx, 4], \
             box[ly, lx, 5]
+        # one colour in all nine (the background around a volume, mostly): the clamp gives that colour whatever the
+        # history says, so the run skips the Catmull-Rom fetch (the same sums, without the 48 loads a pixel)
+        flat = rectify and lo0 == hi0 and lo1 == hi1 and lo2 == hi2
+        f0, f1, f2 = _to_rgb(lo0, lo1, lo2)
         last_ix = -2
         k0 = k1 = k2 = k3 = (np.float32(0.0), np.float32(0.0), np.float32(0.0))  # the four columns' RGB
         for x in range(runs[lx], runs[lx + 1]):
@@ -165,7 +170,9 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                     dropped = d - _nearest_depth(history, iy, iy1, ix, ix1) > disocclusion
                 if not dropped:  # 3. accumulated weight (bilinear) and Catmull-Rom colour
                     n = _history_weight(history, iy, iy1, ix, ix1, tx, ty, cap)
-                if n > 0.0:
+                if n > 0.0 and flat:
+                    h0, h1, h2 = f0, f1, f2
+                elif n > 0.0:
                     if ix == last_ix + 1:  # the next column of the run: one new vertical pass
                         k0, k1, k2 = k1, k2, k3
                         k3 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
