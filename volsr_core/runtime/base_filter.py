@@ -265,9 +265,10 @@ def _filter_bands_pair(taps: int) -> Callable:
                                 value += row[dx] * tap
                                 value_other += row_other[dx] * tap
                             summed[x], summed_other[x] = value, value_other
-                    for end, (lo, hi) in ((band[c, j0, 0], (0, start)), (band[c, j0, last], (stop, width))):
-                        first[lo:hi] = _constant_sum(weights, bias, 0, c, end)
-                        other[lo:hi] = _constant_sum(weights, bias, 1, c, end)
+                    first[:start] = _constant_sum(weights, bias, 0, c, band[c, j0, 0])
+                    other[:start] = _constant_sum(weights, bias, 1, c, band[c, j0, 0])
+                    first[stop:width] = _constant_sum(weights, bias, 0, c, band[c, j0, last])
+                    other[stop:width] = _constant_sum(weights, bias, 1, c, band[c, j0, last])
                     for x in range(width):
                         out[y, x, c] = min(max(first[x] + pick[x] * (other[x] - first[x]), low), high)
 
