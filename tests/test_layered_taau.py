@@ -103,6 +103,33 @@ def test_constant_slabs_stay_constant_over_the_background_under_any_motion_and_j
         assert np.all(up.history[1] == 0.0), "an empty slab keeps an empty history"
 
 
+def test_a_slab_history_is_zero_exactly_where_the_slab_shows_nothing_around_frame_after_frame():
+    """The kernel writes an empty slab's pixels only where its buffer (one of two, alternating) last held something:
+    a patch that jumps about and vanishes must leave no trace. Unjittered, HR pixel X's nearest LR sample is X //
+    scale, so a slab's history must be non-zero exactly on the HR pixels of the LR samples within one of a shown
+    one (the 3x3 the prepass looks at)."""
+    rng = np.random.default_rng(5)
+    scale, lr = 2, 12
+    up = LayeredUpsampler(scale)
+    for t in range(8):
+        slabs = np.zeros((2, lr, lr, 6), dtype=np.float32)
+        slabs[1, ..., :4] = (0.2, 0.3, 0.1, 0.4)  # the back slab shows everywhere
+        shown = np.zeros((lr, lr), bool)
+        if t not in (3, 6):  # frames 3 and 6: the front slab shows nothing at all
+            j, i = rng.integers(0, lr - 3, 2)
+            shown[j:j + 3, i:i + 2] = True
+        slabs[0][shown] = (0.3, 0.2, 0.1, 0.6, 0.0, 0.0)
+        slabs[..., 4:6] = rng.uniform(-1, 1, (2, lr, lr, 2))
+        up(slabs, (0.0, 0.0), rotation=2.0)
+        around = np.zeros_like(shown)
+        for dj, di in np.ndindex(3, 3):
+            around |= np.roll(np.pad(shown, 1), (dj - 1, di - 1), axis=(0, 1))[1:-1, 1:-1]
+        hr_around = np.kron(around, np.ones((scale, scale), bool))
+        assert np.all(up.history[0][~hr_around] == 0.0), f"frame {t}: a trace where the front slab shows nothing"
+        assert np.all(up.history[0][hr_around][:, 4] > 0.0), f"frame {t}: no history where it shows"
+        assert np.all(up.history[1][..., 4] > 0.0)
+
+
 @pytest.mark.parametrize("rotation", [2.0, 0.0])
 def test_the_history_is_clamped_while_the_view_is_still_and_blended_whole_while_it_rotates(rotation: float):
     """An opaque slab turns from one uniform colour to another between two frames that move (motion 0.25 LR px).
@@ -122,6 +149,19 @@ def test_the_history_is_clamped_while_the_view_is_still_and_blended_whole_while_
         old_share = (out - after) / (before - after)  # the same for every channel: one blend of two colours
         assert np.all(old_share > 0.05) and np.all(old_share < 0.95)
         np.testing.assert_allclose(old_share, old_share[..., :1].repeat(3, axis=-1), atol=1e-5)
+
+
+def test_a_layered_estimate_written_into_out_is_the_one_returned_otherwise():
+    fresh, into = LayeredUpsampler(4), LayeredUpsampler(4)
+    buffer = np.full((64, 64, 3), np.nan, np.float32)
+    for t in range(4):
+        jitter = halton_jitter(t, jitter_phases(4))
+        slabs = lr_slabs(16, 4, jitter, t, 1.5)
+        expected = fresh(slabs, jitter, rotation=2.0)
+        assert into(slabs, jitter, rotation=2.0, out=buffer) is buffer
+        np.testing.assert_array_equal(buffer, expected)
+    with pytest.raises(ValueError, match="out must be"):
+        into(slabs, (0.0, 0.0), out=np.empty((64, 64, 3)))
 
 
 def test_a_change_in_slabs_or_size_starts_a_new_history():

@@ -142,6 +142,23 @@ def test_bad_arguments_are_rejected():
         up(np.zeros((4, 4, 3), np.float32), np.zeros((4, 4, 2), np.float32), (0.0, 0.0), np.zeros((3, 4)))
 
 
+def test_an_estimate_written_into_out_is_the_one_returned_otherwise_frame_after_frame():
+    """``out=`` (a buffer the caller reuses, as the XS upscaler does): the same values as a new image each frame, in
+    that buffer; a buffer of another shape, type or layout is refused."""
+    rng = np.random.default_rng(8)
+    fresh, into = TemporalUpsampler(2), TemporalUpsampler(2)
+    buffer = np.full((12, 10, 3), np.nan, np.float32)
+    for t in range(4):
+        colour, motion = rng.random((6, 5, 3), dtype=np.float32), rng.uniform(-1, 1, (6, 5, 2)).astype(np.float32)
+        jitter = halton_jitter(t, jitter_phases(2))
+        expected = fresh(colour, motion, jitter, rotation=2.0)
+        assert into(colour, motion, jitter, rotation=2.0, out=buffer) is buffer
+        np.testing.assert_array_equal(buffer, expected)
+    for bad in (np.empty((12, 10, 4), np.float32), np.empty((12, 10, 3)), np.empty((10, 12, 3), np.float32).T):
+        with pytest.raises(ValueError, match="out must be"):
+            into(colour, motion, (0.0, 0.0), out=bad)
+
+
 def test_reset_and_size_change_start_again_from_the_current_frame():
     rng = np.random.default_rng(6)
     still = np.zeros((5, 5, 2), dtype=np.float32)

@@ -229,8 +229,11 @@ class StatefulUpscaler:
         rotation = view_rotation(frame.camera, frame.previous_camera)
         # the layered TAAU is told the pixels per voxel whatever the model's TAAU is told: XS 4x's filter on the told
         # layered estimate beat it on the untold one by 0.7-1.9 dB at 1024² (docs/temporal.md, "Layered history")
+        # on the CPU the estimate goes into a buffer kept between frames: the filter reads it and keeps nothing
+        estimate = None if self.on_device or self.history.taau is None else self._scratch.get(
+            "estimate", (colour.shape[0] * self.config.scale, colour.shape[1] * self.config.scale, 3))
         base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth, rotation, frame.pixels_per_voxel,
-                            slabs=frame.slabs, background=background)
+                            slabs=frame.slabs, background=background, out=estimate)
         if self._device_filter is not None:
             return self._device_filter.filter(base, clip_output=True)  # on the device: the caller copies it back
         if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale

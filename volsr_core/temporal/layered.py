@@ -36,7 +36,7 @@ import numpy as np
 
 from volsr_core.render.layout import SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA
 from volsr_core.temporal.stages import CPU_STAGES
-from volsr_core.temporal.taau import TemporalUpsampler, _moves, checked_jitter
+from volsr_core.temporal.taau import TemporalUpsampler, _moves, checked_jitter, output_image
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
 _row_window, _splat_weights, _taps = CPU_STAGES.sample_window, CPU_STAGES.splat_weights, CPU_STAGES.bilinear_taps
@@ -97,7 +97,7 @@ def _prepass(slabs, box, across, info):
 
 @numba.njit(**_NB)
 def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
-         out, new_history, acc):
+         out, new_history, shown, acc):
     n_slabs, hr_h, hr_w = new_history.shape[0], new_history.shape[1], new_history.shape[2]
     lr_h, lr_w = slabs.shape[1], slabs.shape[2]
     ly, y0, y1, dy0, wy0, wy1 = _row_window(y, scale, jy, lr_h, inv2s2)
@@ -108,8 +108,10 @@ def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, te
         for lx in range(lr_w):
             if info[k, ly, lx, 10] == 0.0:  # the slab shows nothing around here: an empty history
                 for x in range(runs[lx], runs[lx + 1]):
-                    for c in range(5):
-                        new_history[k, y, x, c] = 0.0
+                    if shown[k, y, x]:  # else the buffer holds zeros there already
+                        for c in range(5):
+                            new_history[k, y, x, c] = 0.0
+                        shown[k, y, x] = 0
                 continue
             mx = scale * info[k, ly, lx, 8]
             sy = y + scale * info[k, ly, lx, 9]
@@ -145,6 +147,7 @@ def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, te
                     new_history[k, y, x, c] = o
                     acc[x, c] += behind * o
                 new_history[k, y, x, 4] = min(n + a, cap)
+                shown[k, y, x] = 1
     for x in range(hr_w):
         behind = 1.0 - acc[x, 3]
         for c in range(3):
@@ -153,11 +156,11 @@ def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, te
 
 @numba.njit(parallel=True, **_NB)
 def _kernel(history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background, out,
-            new_history):
+            new_history, shown):
     for y in numba.prange(out.shape[0]):
         acc = np.empty((out.shape[1], 4), dtype=np.float32)
         _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
-             out, new_history, acc)
+             out, new_history, shown, acc)
 
 
 class LayeredUpsampler(TemporalUpsampler):
@@ -176,10 +179,16 @@ class LayeredUpsampler(TemporalUpsampler):
                          **settings)
         self._info: np.ndarray | None = None  # the prepass's results, and its work buffer
         self._across: np.ndarray | None = None
+        # per history buffer (K, H, W) uint8: 1 where it may hold something other than zeros (a slab's pixels shown
+        # there), so a pixel that stays empty is not written again
+        self._history_shown: np.ndarray | None = None
+        self._spare_shown: np.ndarray | None = None
 
     def __call__(self, lr_slabs: np.ndarray, jitter: tuple[float, float], background=(0.0, 0.0, 0.0),
-                 rotation: float | None = None, pixels_per_voxel: float | None = None) -> np.ndarray:
-        """Accumulate one LR frame given as its depth slabs; returns a new (h * scale, w * scale, 3) float32 image.
+                 rotation: float | None = None, pixels_per_voxel: float | None = None, *,
+                 out: np.ndarray | None = None) -> np.ndarray:
+        """Accumulate one LR frame given as its depth slabs; returns a new (h * scale, w * scale, 3) float32 image, or
+        ``out`` written with it (as :meth:`TemporalUpsampler.__call__`).
 
         ``lr_slabs`` (K, h, w, SLAB_CHANNELS): :attr:`~volsr_core.render.features.FeatureFrame.slabs`, nearest
         first, motion in LR pixels; ``jitter`` (jx, jy) in [-0.5, 0.5); ``background`` the RGB the slabs are
@@ -203,11 +212,13 @@ class LayeredUpsampler(TemporalUpsampler):
             self._info = np.empty((n_slabs, h, w, _INFO), dtype=np.float32)
             self._across = np.empty_like(self._info)
         _prepass(slabs, rectify, self._across, self._info)
-        new_history = self._spare if self._spare is not None and self._spare.shape == shape else \
-            np.empty(shape, dtype=np.float32)
-        out = np.empty((h * s, w * s, 3), dtype=np.float32)
+        if self._spare is not None and self._spare.shape == shape:
+            new_history, shown = self._spare, self._spare_shown
+        else:  # zeros: an empty slab's pixels need no writing
+            new_history, shown = np.zeros(shape, dtype=np.float32), np.zeros(shape[:3], dtype=np.uint8)
+        out = output_image(out, (h * s, w * s))
         _kernel(history, has, slabs, self._info, cols, runs, s, jy, 1.0 / (2.0 * sigma * sigma), tent, cap,
-                rectify, np.asarray(background, dtype=np.float32), out, new_history)
-        self._spare = self.history if has else None
-        self.history = new_history
+                rectify, np.asarray(background, dtype=np.float32), out, new_history, shown)
+        self._spare, self._spare_shown = (self.history, self._history_shown) if has else (None, None)
+        self.history, self._history_shown = new_history, shown
         return out
