@@ -1,8 +1,9 @@
 """Where VolSR XS's time after the LR render goes inside a ``Pipeline``: median ms per frame of the whole step and
-of its kernels (TAAU's prepass and kernel, or at 4x and more the layered TAAU's, and the filter).
+of its kernels (TAAU's prepass and kernel, or at 4x and more the layered TAAU's, the filter and, with ``--stretch``
+K, the bicubic stretch of XS at 1/K of the size: ``Pipeline(..., stretch=K)``).
 
     python benchmarks/profile_xs_pipeline.py [--volume MR_Gd.nii.gz:MR-Default] [--size 1024] [--scale 2]
-                                             [--frames 24]
+                                             [--frames 24] [--stretch 2]
 
 The pipeline renders an orbit of ``--frames`` frames of 2° each; the first four are not counted (history,
 compilation). Run it under different process settings (``OMP_WAIT_POLICY=PASSIVE python ...``) and alternate
@@ -16,6 +17,7 @@ from typing import Callable
 
 from bench_taau import orbit_parser, orbit_scene
 
+import volsr_core.runtime.pipeline as pipeline_module
 import volsr_core.runtime.upscaler as upscaler
 import volsr_core.temporal.layered as layered
 import volsr_core.temporal.taau as taau
@@ -43,21 +45,24 @@ def main() -> None:
     parser.set_defaults(volume="MR_Gd.nii.gz:MR-Default", frames=24)
     parser.add_argument("--size", type=int, default=1024)
     parser.add_argument("--scale", type=int, default=2)
+    parser.add_argument("--stretch", type=int, default=1, help="XS at 1/k of the size, stretched bicubically by k")
     args = parser.parse_args()
     scene, _, cameras = orbit_scene(args)
     times: dict[str, list[float]] = {}
     for module, name in ((taau, "_prepass"), (taau, "_kernel"), (layered, "_prepass"), (layered, "_kernel"),
-                         (upscaler, "filter_image")):
+                         (upscaler, "filter_image"), (pipeline_module, "resize_bicubic")):
         timed(module, name, times)
     pipeline = Pipeline(scene.volume, scene.transfer_function, scale=args.scale, variant="XS",
-                        size=(args.size, args.size), threads=2)
+                        size=(args.size, args.size), threads=2, stretch=args.stretch)
     step, render = [], []
     for camera in cameras:
         pipeline.render(camera)
         step.append(pipeline.last_timings["network_ms"])
         render.append(pipeline.last_timings["render_ms"])
     after = statistics.median(step[WARMUP:])
-    print(f"{scene.label}, {args.size}², XS {args.scale}x in {pipeline.slabs} slabs: LR render "
+    print(f"{scene.label}, {args.size}², XS {pipeline.model_scale}x"
+          + (f" in {pipeline.slabs} slabs" if pipeline.slabs else "")
+          + (f" + bicubic {args.stretch}x" if args.stretch > 1 else "") + ": LR render "
           f"{statistics.median(render[WARMUP:]):.2f} ms, after it {after:.2f} ms"
           + "".join(f", {name} {statistics.median(ms[WARMUP:]):.2f}" for name, ms in times.items()))
 
