@@ -26,6 +26,7 @@ from collections import defaultdict
 
 import numpy as np
 from bench_taau import DATA
+from skimage.metrics import peak_signal_noise_ratio
 from tqdm import tqdm
 
 from volsr_core.apps.bench.scenes import load_bench_volume
@@ -39,7 +40,8 @@ WARMUP = 4
 
 
 def psnr(image: np.ndarray, truth: np.ndarray) -> float:
-    return float(10 * np.log10(1.0 / np.mean((np.clip(image, 0.0, 1.0) - truth.astype(np.float64)) ** 2)))
+    """PSNR (dB) of ``image`` clipped to [0, 1] against ``truth`` (scikit-image's; ``psnr_ssim`` adds SSIM)."""
+    return float(peak_signal_noise_ratio(truth.astype(np.float64), np.clip(image, 0.0, 1.0), data_range=1.0))
 
 
 def phase_taps(n: int, phase: int) -> np.ndarray:
