@@ -15,17 +15,15 @@ from __future__ import annotations
 
 import argparse
 
-from bench_taau import DATA
+from bench_taau import orbit_scene
 from probe_stretch_kernel import VOLUMES
 from tqdm import tqdm
 
 from volsr_core.apps.bench.report import curve_psnr_at
 from volsr_core.apps.bench.run import FACTORS, bench_one
-from volsr_core.apps.bench.scenes import load_bench_volume
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.runtime.methods import Native, ReducedSize, VolSR
 from volsr_core.runtime.pipeline import Pipeline
-from volsr_core.scene.camera_paths import orbit_around
 
 FRAMES, WARMUP, PASSES = 12, 4, 3
 
@@ -54,9 +52,7 @@ def main() -> None:
     table: dict[str, list[str]] = {}
     names = []
     for spec in VOLUMES:
-        scene = load_bench_volume(str(DATA / spec))
-        caster = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign")
-        cameras = orbit_around(caster.visible_bounds(), FRAMES, args.degrees)
+        scene, caster, cameras = orbit_scene(argparse.Namespace(volume=spec, frames=FRAMES, degrees=args.degrees))
         first = methods(scene, caster, args.size)
         with tqdm(total=FRAMES * (1 + len(first) * PASSES), desc=scene.name, unit="frame") as progress:
             rows = bench_one(scene, caster, (args.size, args.size), first, cameras, warmup=WARMUP, progress=progress,
