@@ -1,0 +1,61 @@
+"""One table of where every VolSR point of several ``volsr bench`` runs lies against the native + bilinear curve.
+
+    python benchmarks/bench_summary.py docs/bench/512-2deg docs/bench/512-5deg docs/bench/1024-2deg docs/bench/1024-5deg
+
+Per VolSR method (a row) and run (a column, in the order given): its distance to the curve at equal time over the
+run's volumes, lowest to highest in dB, and on how many volumes it clears issue 12's margin (target 2,
+:func:`~volsr_core.apps.bench.report.check_targets`, read again from each run's rows). What docs/performance.md
+opens with; the runs' own bench.md give each volume.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from volsr_core.apps.bench.report import TARGET_MARGIN_DB, check_targets
+
+
+def margins(rows: list[dict]) -> dict[str, list[float]]:
+    """VolSR label -> its margins (dB) over the run's volumes, in the rows' order."""
+    found: dict[str, list[float]] = {}
+    for scene in check_targets(rows).values():
+        for point in scene["above_bilinear"]["points"]:
+            found.setdefault(point["label"], []).append(point["margin_db"])
+    return found
+
+
+def render_factors(rows: list[dict]) -> dict[str, int]:
+    """VolSR label -> how many times smaller per axis than the output its LR frame is (a row's ``scale``: a model's
+    times its stretch)."""
+    return {r["label"]: int(r["scale"]) for r in rows if r["method"] == "volsr"}
+
+
+def cell(values: list[float] | None) -> str:
+    if not values:
+        return "–"
+    cleared = sum(v >= TARGET_MARGIN_DB for v in values)
+    span = f"{min(values):+.2f}" if len(values) == 1 else f"{min(values):+.2f} to {max(values):+.2f}"
+    return f"{span} ({cleared}/{len(values)})"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("folders", nargs="+", type=Path, help="folders holding a bench.json, one column each")
+    runs, factors = [], {}
+    for folder in parser.parse_args().folders:
+        results = json.loads((folder / "bench.json").read_text(encoding="utf-8"))
+        settings = results["settings"]
+        runs.append((f"{settings['size'][0]}², {settings['degrees_per_frame']:g}°/frame", margins(results["rows"])))
+        factors.update(render_factors(results["rows"]))
+    labels = sorted(dict.fromkeys(label for _, found in runs for label in found), key=lambda label: factors[label])
+    print(f"| VolSR point (volumes ≥ +{TARGET_MARGIN_DB} dB) | renders at | " + " | ".join(name for name, _ in runs)
+          + " |")
+    print("|---|---|" + "---:|" * len(runs))
+    for label in labels:
+        print(f"| {label} | 1/{factors[label]} size | " + " | ".join(cell(found.get(label)) for _, found in runs)
+              + " |")
+
+
+if __name__ == "__main__":
+    main()
