@@ -130,20 +130,22 @@ def test_a_slab_history_is_zero_exactly_where_the_slab_shows_nothing_around_fram
         assert np.all(up.history[1][..., 4] > 0.0)
 
 
-@pytest.mark.parametrize("rotation", [2.0, 0.0])
-def test_the_history_is_clamped_while_the_view_is_still_and_blended_whole_while_it_rotates(rotation: float):
+@pytest.mark.parametrize("rotation, clamp_rotating", [(2.0, False), (0.0, False), (2.0, True)])
+def test_the_history_is_clamped_while_the_view_is_still_and_blended_whole_while_it_rotates(rotation: float,
+                                                                                          clamp_rotating: bool):
     """An opaque slab turns from one uniform colour to another between two frames that move (motion 0.25 LR px).
-    While the view is still (a pan: the history may grow long) the 3x3 box of the new frame, a single colour,
-    clamps the history to it: the new colour exactly. While it rotates the history is short and not clamped: the
-    output lies strictly between the two, the old colour's share that of the history's weight."""
+    While the view is still (a pan: the history may grow long), or rotates with ``clamp_rotating``, the 3x3 box of
+    the new frame, a single colour, clamps the history to it: the new colour exactly. While it rotates the history is
+    otherwise short and not clamped: the output lies strictly between the two, the old colour's share that of the
+    history's weight."""
     before, after = np.array([0.8, 0.2, 0.1], np.float32), np.array([0.1, 0.5, 0.9], np.float32)
-    up = LayeredUpsampler(4)
+    up = LayeredUpsampler(4, clamp_rotating=clamp_rotating)
     slabs = np.zeros((2, 8, 8, 6), dtype=np.float32)
     slabs[0, ..., :3], slabs[0, ..., 3] = before, 1.0
     up(slabs, (0.0, 0.0), rotation=rotation)
     slabs[0, ..., :3], slabs[0, ..., 4] = after, 0.25
     out = up(slabs, (0.25, -0.25), rotation=rotation)[8:24, 8:24]  # away from the border the history is fetched from
-    if rotation == 0.0:
+    if rotation == 0.0 or clamp_rotating:
         np.testing.assert_allclose(out, np.broadcast_to(after, out.shape), atol=1e-6)
     else:
         old_share = (out - after) / (before - after)  # the same for every channel: one blend of two colours

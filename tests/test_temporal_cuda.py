@@ -48,7 +48,9 @@ SCRIPT = textwrap.dedent("""
             close(f"TAAU {scale}x frame {t}", cpu(*args), gpu(*args).copy_to_host())
             close(f"TAAU {scale}x history {t}", cpu.history, gpu.history.copy_to_host())
 
-        cpu, gpu = LayeredUpsampler(scale), CudaLayeredUpsampler(scale)
+        clamp_rotating = scale == 4  # the clamp under rotation too (an option), at one of the scales
+        cpu = LayeredUpsampler(scale, clamp_rotating=clamp_rotating)
+        gpu = CudaLayeredUpsampler(scale, clamp_rotating=clamp_rotating)
         for t, (rotation, ppv, moves) in enumerate(views):
             slabs = np.zeros((2, h, w, 6), np.float32)
             alpha = rng.random((2, h, w), dtype=np.float32)

@@ -18,7 +18,9 @@ pixel and slab, the steps of :class:`~volsr_core.temporal.taau.TemporalUpsampler
    ``still_count``): per-channel clamp into the slab's RGBA min/max box of the 3x3 LR neighbourhood;
    skipped when nothing moves at all, as TAAU does, and under rotation, where the cap keeps the history
    short and the slabs already keep apart what moves apart: there the clamp threw away more good history
-   than stale (measured on the training videos: docs/temporal.md, "A shorter history");
+   than stale (measured on the training videos: docs/temporal.md, "A shorter history"); ``clamp_rotating``
+   clamps under rotation too (on a shiny look sampled finely the unclamped history keeps the highlights of
+   earlier views: docs/performance.md, "Off the bench");
 5. blend as TAAU (``out = (n * history + a * estimate) / (n + a)``, ``n`` capped by the view's rotation,
    ``max_count / (1 + rotation / cap_angle)`` with ``cap_angle`` 0.3 here against TAAU's 2/3: the bilinear
    fetch blurs what it resamples, so a shorter history pays);
@@ -170,19 +172,26 @@ class LayeredUpsampler(TemporalUpsampler):
     ``cap_angle`` 0.3 degrees and ``smooth_count`` 0.5 by default (measured: docs/temporal.md, "Layered history"
     and "A shorter history"; where frames sample finely the cap falls by half, not to a quarter, which keeps it
     where it was before the shorter cap: 0.26 against 0.25 at 4x and 2°); the number of slabs is the frames' own
-    (``RayCaster.render(..., slabs=K)``).
+    (``RayCaster.render(..., slabs=K)``). ``clamp_rotating`` clamps the history into its slab's 3x3 box while the
+    view rotates too, not only under a pan or a zoom (off by default: chosen on the training videos).
     """
 
     def __init__(self, scale: int, *, sigma: float = 0.25, cap_angle: float = 0.3, smooth_count: float = 0.5,
-                 **settings):
+                 clamp_rotating: bool = False, **settings):
         super().__init__(scale, sigma=sigma, cap_angle=cap_angle, smooth_count=smooth_count, side_outputs=False,
                          **settings)
+        self.clamp_rotating = bool(clamp_rotating)
         self._info: np.ndarray | None = None  # the prepass's results, and its work buffer
         self._across: np.ndarray | None = None
         # per history buffer (K, H, W) uint8: 1 where it may hold something other than zeros (a slab's pixels shown
         # there), so a pixel that stays empty is not written again
         self._history_shown: np.ndarray | None = None
         self._spare_shown: np.ndarray | None = None
+
+    def _rectifies(self, static: bool, still: bool) -> bool:
+        """Whether this frame clamps the history (step 4 of the module docstring): under a pan or a zoom, and while the
+        view rotates too with ``clamp_rotating``; never when nothing moves."""
+        return (still or self.clamp_rotating) and not static
 
     def __call__(self, lr_slabs: np.ndarray, jitter: tuple[float, float], background=(0.0, 0.0, 0.0),
                  rotation: float | None = None, pixels_per_voxel: float | None = None, *,
@@ -206,7 +215,7 @@ class LayeredUpsampler(TemporalUpsampler):
         history = self.history if has else np.zeros((1, 1, 1, 5), dtype=np.float32)
         motion = slabs.reshape(n_slabs * h, w, SLAB_CHANNELS)[..., SLAB_MOTION:SLAB_MOTION + 2]
         static, still, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
-        rectify = still and not static  # the clamp only under a pan or a zoom (see the module docstring)
+        rectify = self._rectifies(static, still)
         cols, runs = self._columns(w, jx, sigma)
         if self._info is None or self._info.shape[:3] != (n_slabs, h, w):
             self._info = np.empty((n_slabs, h, w, _INFO), dtype=np.float32)
