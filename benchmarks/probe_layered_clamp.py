@@ -19,7 +19,7 @@ from probe_stretch_kernel import WARMUP, psnr
 from tqdm import tqdm
 
 from volsr_core.runtime.methods import Taau
-from volsr_core.temporal import render_supersampled
+from volsr_core.temporal.ground_truth import supersampled_truth
 from volsr_core.temporal.layered import LayeredUpsampler
 
 SLABS = 2
@@ -49,7 +49,7 @@ def main() -> None:
         images = {label: method(camera).image for label, method in methods.items()}
         if t < WARMUP:
             continue
-        truth = render_supersampled(caster, camera, args.size, args.size, spp=16, seed=10**6 + t * 16)
+        truth = supersampled_truth(caster, camera, t, args.size, args.size)
         shown = truth.max(axis=-1) > OBJECT
         for label, image in images.items():
             scores[label].append(psnr(image, truth))

@@ -22,6 +22,7 @@ from tqdm import tqdm
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.runtime.pipeline import STRETCH_CUBIC_A, Pipeline
 from volsr_core.temporal import render_supersampled
+from volsr_core.temporal.ground_truth import supersampled_truth
 from volsr_core.temporal.resample import resize_bicubic
 
 SCALE = 2
@@ -48,7 +49,7 @@ def main() -> None:
         xs_image = xs.render(camera)
         if t < WARMUP:
             continue
-        truth = render_supersampled(caster, camera, args.size, args.size, spp=16, seed=10**6 + t * 16)
+        truth = supersampled_truth(caster, camera, t, args.size, args.size)
         seed = 10**5 * (t + 1)
         starts = np.mean([caster.render_color(camera, half, half, seed=seed + k) for k in range(STARTS)], axis=0)
         halves = [caster.render_color(camera, half, half, seed=seed), starts,

@@ -18,7 +18,7 @@ from tqdm import tqdm
 
 from volsr_core.runtime.methods import ReducedSize
 from volsr_core.runtime.pipeline import Pipeline
-from volsr_core.temporal import render_supersampled
+from volsr_core.temporal.ground_truth import supersampled_truth
 
 BENCH_FRAMES = 12
 
@@ -35,7 +35,7 @@ def main() -> None:
         pipelines[f"1/{scale} + bilinear"] = ReducedSize(caster, (args.size, args.size), scale)
     scores = []
     for t, camera in enumerate(tqdm(cameras, desc=scene.label.split(",")[0], unit="frame")):
-        truth = render_supersampled(caster, camera, args.size, args.size, spp=16, seed=10**6 + t * 16)
+        truth = supersampled_truth(caster, camera, t, args.size, args.size)
         images = [p.render(camera) if isinstance(p, Pipeline) else p(camera).image for p in pipelines.values()]
         scores.append([psnr(image, truth) for image in images])
     scores = np.array(scores)

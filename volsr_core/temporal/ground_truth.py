@@ -23,13 +23,22 @@ from volsr_core.temporal.taa import TemporalAntiAliasing
 MODES = ("supersampled", "taa")
 
 
+def supersampled_truth(caster: RayCaster, camera: Camera, index: int, width: int, height: int,
+                       spp: int = 16, on_device: bool = False) -> np.ndarray:
+    """The (H, W, 3) float32 "supersampled" ground truth of frame ``index`` of a camera path (what
+    :func:`ground_truth_frames` yields for it, and ``volsr bench`` scores against): ``spp`` jittered samples, their
+    ray-start seeds apart from the LR frames' (which count frames from 0); ``on_device`` as
+    :func:`~volsr_core.temporal.supersample.render_supersampled` takes it."""
+    return render_supersampled(caster, camera, width, height, spp=spp, seed=10**6 + index * spp, on_device=on_device)
+
+
 def ground_truth_frames(caster: RayCaster, cameras: Sequence[Camera], width: int, height: int, *,
                         mode: str = "supersampled", spp: int = 16, warmup: int = 16,
                         history_weight: float = 0.9) -> Iterator[np.ndarray]:
     """Yield one (H, W, 3) float32 ground-truth colour image per camera, in order."""
-    if mode == "supersampled":  # ray-start seeds apart from the LR frames' (which count frames from 0)
+    if mode == "supersampled":
         for t, camera in enumerate(cameras):
-            yield render_supersampled(caster, camera, width, height, spp=spp, seed=10**6 + t * spp)
+            yield supersampled_truth(caster, camera, t, width, height, spp)
         return
     if mode != "taa":
         raise ValueError(f"ground-truth mode must be one of {MODES}, got {mode!r}")

@@ -214,13 +214,13 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
     ``timing_passes``: fresh method lists (the same methods, in the same order, each built anew) for the passes
     after the scored one, taken one at a time (a generator builds each only when its pass starts)."""
     from volsr_core.sr.metrics import psnr_ssim
-    from volsr_core.temporal import render_supersampled
+    from volsr_core.temporal.ground_truth import supersampled_truth
 
     width, height = size
     truth = []
-    for t, camera in enumerate(cameras):  # ray-start seeds apart from the methods' (which count frames from 0)
-        image = render_supersampled(caster, camera, width, height, spp=reference_spp, seed=10**6 + t * reference_spp,
-                                    on_device=caster.device == "cuda")  # on a GPU summed there, one copy back
+    for t, camera in enumerate(cameras):
+        image = supersampled_truth(caster, camera, t, width, height, reference_spp,
+                                   on_device=caster.device == "cuda")  # on a GPU summed there, one copy back
         truth.append(to_host(image)[0])
         if progress is not None:
             progress.update()
