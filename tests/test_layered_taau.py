@@ -130,27 +130,40 @@ def test_a_slab_history_is_zero_exactly_where_the_slab_shows_nothing_around_fram
         assert np.all(up.history[1][..., 4] > 0.0)
 
 
-@pytest.mark.parametrize("rotation, clamp_rotating", [(2.0, False), (0.0, False), (2.0, True)])
-def test_the_history_is_clamped_while_the_view_is_still_and_blended_whole_while_it_rotates(rotation: float,
-                                                                                          clamp_rotating: bool):
+@pytest.mark.parametrize("rotation, clamp_rotating, pixels_per_voxel, clamps", [
+    (0.0, "never", None, True),  # a pan: clamped whatever the setting
+    (2.0, "never", 0.5, False),
+    (2.0, "fine", None, False),  # sampling unknown: not fine
+    (2.0, "fine", 0.4, False),  # 1.6 output pixels a voxel, below the fine-sampling ramp (from 1.75)
+    (2.0, "fine", 0.5, True),  # 2.0 output pixels a voxel: on it
+    (2.0, "always", None, True),
+])
+def test_the_history_is_clamped_while_the_view_is_still_or_sampled_finely_and_blended_whole_otherwise(
+        rotation: float, clamp_rotating: str, pixels_per_voxel: float | None, clamps: bool):
     """An opaque slab turns from one uniform colour to another between two frames that move (motion 0.25 LR px).
-    While the view is still (a pan: the history may grow long), or rotates with ``clamp_rotating``, the 3x3 box of
-    the new frame, a single colour, clamps the history to it: the new colour exactly. While it rotates the history is
-    otherwise short and not clamped: the output lies strictly between the two, the old colour's share that of the
-    history's weight."""
+    While the view is still (a pan: the history may grow long), or rotates where ``clamp_rotating`` says (by default
+    where the frame samples the volume finely), the 3x3 box of the new frame, a single colour, clamps the history to
+    it: the new colour exactly. Otherwise the history, short under rotation, is not clamped: the output lies strictly
+    between the two, the old colour's share that of the history's weight."""
     before, after = np.array([0.8, 0.2, 0.1], np.float32), np.array([0.1, 0.5, 0.9], np.float32)
     up = LayeredUpsampler(4, clamp_rotating=clamp_rotating)
     slabs = np.zeros((2, 8, 8, 6), dtype=np.float32)
     slabs[0, ..., :3], slabs[0, ..., 3] = before, 1.0
-    up(slabs, (0.0, 0.0), rotation=rotation)
+    up(slabs, (0.0, 0.0), rotation=rotation, pixels_per_voxel=pixels_per_voxel)
     slabs[0, ..., :3], slabs[0, ..., 4] = after, 0.25
-    out = up(slabs, (0.25, -0.25), rotation=rotation)[8:24, 8:24]  # away from the border the history is fetched from
-    if rotation == 0.0 or clamp_rotating:
+    out = up(slabs, (0.25, -0.25), rotation=rotation, pixels_per_voxel=pixels_per_voxel)[8:24, 8:24]  # away from
+    # the border the history is fetched from
+    if clamps:
         np.testing.assert_allclose(out, np.broadcast_to(after, out.shape), atol=1e-6)
     else:
         old_share = (out - after) / (before - after)  # the same for every channel: one blend of two colours
         assert np.all(old_share > 0.05) and np.all(old_share < 0.95)
         np.testing.assert_allclose(old_share, old_share[..., :1].repeat(3, axis=-1), atol=1e-5)
+
+
+def test_an_unknown_clamp_setting_is_refused():
+    with pytest.raises(ValueError, match="clamp_rotating"):
+        LayeredUpsampler(4, clamp_rotating=True)
 
 
 def test_a_layered_estimate_written_into_out_is_the_one_returned_otherwise():

@@ -48,7 +48,7 @@ SCRIPT = textwrap.dedent("""
             close(f"TAAU {scale}x frame {t}", cpu(*args), gpu(*args).copy_to_host())
             close(f"TAAU {scale}x history {t}", cpu.history, gpu.history.copy_to_host())
 
-        clamp_rotating = scale == 4  # the clamp under rotation too (an option), at one of the scales
+        clamp_rotating = "always" if scale == 4 else "fine"  # the clamp under rotation: both settings that clamp
         cpu = LayeredUpsampler(scale, clamp_rotating=clamp_rotating)
         gpu = CudaLayeredUpsampler(scale, clamp_rotating=clamp_rotating)
         for t, (rotation, ppv, moves) in enumerate(views):

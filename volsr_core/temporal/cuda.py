@@ -291,7 +291,7 @@ class CudaLayeredUpsampler(LayeredUpsampler):
         history = self.history if has else cuda.device_array((1, 1, 1, 5), dtype=np.float32)
         moves = _moves(slabs.reshape(n_slabs * h, w, SLAB_CHANNELS), SLAB_MOTION)
         static, still, sigma, cap, tent = self._frame_settings(moves, has, rotation, pixels_per_voxel)
-        rectify = self._rectifies(static, still)
+        rectify = self._rectifies(static, still, pixels_per_voxel)
         if self._info is None or tuple(self._info.shape[:3]) != (n_slabs, h, w):
             self._info = cuda.device_array((n_slabs, h, w, _INFO), dtype=np.float32)
         _layered_prepass[_blocks(w, h), THREADS](slabs, rectify, self._info)

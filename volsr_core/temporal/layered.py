@@ -14,13 +14,14 @@ pixel and slab, the steps of :class:`~volsr_core.temporal.taau.TemporalUpsampler
    most opaque sample of the slab in its 3x3 neighbourhood; a slab empty in all nine is empty here
    (its history is cleared and the pixel costs next to nothing);
 3. **History**: bilinear fetch of the slab's premultiplied RGBA and accumulated weight;
-4. **Rectification**, only while the view does not rotate (a pan, a zoom: the history is long there, up to
-   ``still_count``): per-channel clamp into the slab's RGBA min/max box of the 3x3 LR neighbourhood;
-   skipped when nothing moves at all, as TAAU does, and under rotation, where the cap keeps the history
-   short and the slabs already keep apart what moves apart: there the clamp threw away more good history
-   than stale (measured on the training videos: docs/temporal.md, "A shorter history"); ``clamp_rotating``
-   clamps under rotation too (on a shiny look sampled finely the unclamped history keeps the highlights of
-   earlier views: docs/performance.md, "Off the bench");
+4. **Rectification**: per-channel clamp into the slab's RGBA min/max box of the 3x3 LR neighbourhood, while
+   the view does not rotate (a pan, a zoom: the history is long there, up to ``still_count``) and, by default
+   (``clamp_rotating="fine"``), while it rotates where the frame samples the volume finely (TAAU's
+   fine-sampling settings apply: above ``smooth_between[0]`` output pixels per voxel); skipped when nothing
+   moves at all, as TAAU does. Under rotation the cap keeps the history short and the slabs already keep
+   apart what moves apart: at about one output pixel a voxel (the training videos) the clamp threw away more
+   good history than stale (docs/temporal.md, "A shorter history"), while sampled finely a shiny look's
+   unclamped history keeps the highlights of earlier views (docs/performance.md, "Off the bench");
 5. blend as TAAU (``out = (n * history + a * estimate) / (n + a)``, ``n`` capped by the view's rotation,
    ``max_count / (1 + rotation / cap_angle)`` with ``cap_angle`` 0.3 here against TAAU's 2/3: the bilinear
    fetch blurs what it resamples, so a shorter history pays);
@@ -43,6 +44,7 @@ from volsr_core.temporal.taau import TemporalUpsampler, _moves, checked_jitter, 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
 _row_window, _splat_weights, _taps = CPU_STAGES.sample_window, CPU_STAGES.splat_weights, CPU_STAGES.bilinear_taps
 _EMPTY = 1e-4  # a slab with at most this alpha at an LR sample shows nothing there
+CLAMP_ROTATING = ("never", "fine", "always")  # where the history is clamped while the view rotates
 _INFO = 11  # per slab and LR pixel: RGBA box low (4) and high (4), motion (2), whether the 3x3 shows anything
 
 
@@ -172,15 +174,19 @@ class LayeredUpsampler(TemporalUpsampler):
     ``cap_angle`` 0.3 degrees and ``smooth_count`` 0.5 by default (measured: docs/temporal.md, "Layered history"
     and "A shorter history"; where frames sample finely the cap falls by half, not to a quarter, which keeps it
     where it was before the shorter cap: 0.26 against 0.25 at 4x and 2°); the number of slabs is the frames' own
-    (``RayCaster.render(..., slabs=K)``). ``clamp_rotating`` clamps the history into its slab's 3x3 box while the
-    view rotates too, not only under a pan or a zoom (off by default: chosen on the training videos).
+    (``RayCaster.render(..., slabs=K)``). ``clamp_rotating`` says where the history is clamped into its slab's 3x3
+    box while the view rotates, as it always is under a pan or a zoom: ``"fine"`` (the default) where the frame
+    samples the volume finely (:meth:`smoothing` above 0: the frames of a 1024² view of a 256-voxel volume, not
+    those of the training videos), ``"always"`` or ``"never"``.
     """
 
     def __init__(self, scale: int, *, sigma: float = 0.25, cap_angle: float = 0.3, smooth_count: float = 0.5,
-                 clamp_rotating: bool = False, **settings):
+                 clamp_rotating: str = "fine", **settings):
         super().__init__(scale, sigma=sigma, cap_angle=cap_angle, smooth_count=smooth_count, side_outputs=False,
                          **settings)
-        self.clamp_rotating = bool(clamp_rotating)
+        if clamp_rotating not in CLAMP_ROTATING:
+            raise ValueError(f"clamp_rotating must be one of {CLAMP_ROTATING}, got {clamp_rotating!r}")
+        self.clamp_rotating = clamp_rotating
         self._info: np.ndarray | None = None  # the prepass's results, and its work buffer
         self._across: np.ndarray | None = None
         # per history buffer (K, H, W) uint8: 1 where it may hold something other than zeros (a slab's pixels shown
@@ -188,10 +194,15 @@ class LayeredUpsampler(TemporalUpsampler):
         self._history_shown: np.ndarray | None = None
         self._spare_shown: np.ndarray | None = None
 
-    def _rectifies(self, static: bool, still: bool) -> bool:
+    def _rectifies(self, static: bool, still: bool, pixels_per_voxel: float | None) -> bool:
         """Whether this frame clamps the history (step 4 of the module docstring): under a pan or a zoom, and while the
-        view rotates too with ``clamp_rotating``; never when nothing moves."""
-        return (still or self.clamp_rotating) and not static
+        view rotates as ``clamp_rotating`` says (``pixels_per_voxel``: the LR frame's, None when unknown); never when
+        nothing moves."""
+        if static:
+            return False
+        if still or self.clamp_rotating == "always":
+            return True
+        return self.clamp_rotating == "fine" and self.smoothing(pixels_per_voxel) > 0.0
 
     def __call__(self, lr_slabs: np.ndarray, jitter: tuple[float, float], background=(0.0, 0.0, 0.0),
                  rotation: float | None = None, pixels_per_voxel: float | None = None, *,
@@ -215,7 +226,7 @@ class LayeredUpsampler(TemporalUpsampler):
         history = self.history if has else np.zeros((1, 1, 1, 5), dtype=np.float32)
         motion = slabs.reshape(n_slabs * h, w, SLAB_CHANNELS)[..., SLAB_MOTION:SLAB_MOTION + 2]
         static, still, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
-        rectify = self._rectifies(static, still)
+        rectify = self._rectifies(static, still, pixels_per_voxel)
         cols, runs = self._columns(w, jx, sigma)
         if self._info is None or self._info.shape[:3] != (n_slabs, h, w):
             self._info = np.empty((n_slabs, h, w, _INFO), dtype=np.float32)
