@@ -19,7 +19,7 @@ pixel and slab, the steps of :class:`~volsr_core.temporal.taau.TemporalUpsampler
    (``clamp_rotating="fine"``), while it rotates where the frame samples the volume finely (TAAU's
    fine-sampling settings apply: above ``smooth_between[0]`` output pixels per voxel); skipped when nothing
    moves at all, as TAAU does. Under rotation the cap keeps the history short and the slabs already keep
-   apart what moves apart: at about one output pixel a voxel (the training videos) the clamp threw away more
+   apart what moves apart: at about one output pixel a voxel (most training videos) the clamp threw away more
    good history than stale (docs/temporal.md, "A shorter history"), while sampled finely a shiny look's
    unclamped history keeps the highlights of earlier views (docs/performance.md, "Off the bench");
 5. blend as TAAU (``out = (n * history + a * estimate) / (n + a)``, ``n`` capped by the view's rotation,
@@ -177,7 +177,7 @@ class LayeredUpsampler(TemporalUpsampler):
     (``RayCaster.render(..., slabs=K)``). ``clamp_rotating`` says where the history is clamped into its slab's 3x3
     box while the view rotates, as it always is under a pan or a zoom: ``"fine"`` (the default) where the frame
     samples the volume finely (:meth:`smoothing` above 0: the frames of a 1024² view of a 256-voxel volume, not
-    those of the training videos), ``"always"`` or ``"never"``.
+    those of a 512² one), ``"always"`` or ``"never"``.
     """
 
     def __init__(self, scale: int, *, sigma: float = 0.25, cap_angle: float = 0.3, smooth_count: float = 0.5,
