@@ -1,6 +1,6 @@
 """The layered TAAU's clamp under rotation, never against where frames sample finely (the default), on training videos.
 
-    python benchmarks/probe_layered_clamp_videos.py training/configs/dataset_motion.yaml   # ~5 min, 2 cores
+    python benchmarks/probe_layered_clamp_videos.py training/configs/dataset_motion.yaml   # ~8 min, 2 cores
 
 ``LayeredUpsampler(clamp_rotating="fine")`` clamps the history while the view rotates on frames whose output samples
 the volume finely (TAAU's fine-sampling ramp, from 1.75 output pixels a voxel); it was chosen on the bench's 1024²
