@@ -16,13 +16,13 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-import onnx
 from probe_stretch_kernel import WARMUP, psnr
 from tqdm import tqdm
 
 from volsr_core.dataset.config import read_config
 from volsr_core.dataset.videos import camera_path, load_dataset_volume, plan_videos
-from volsr_core.runtime.base_filter import FILTER_KEY, filter_image, read_filter_metadata
+from volsr_core.runtime.base_filter import filter_image
+from volsr_core.runtime.engines import OnnxEngine
 from volsr_core.runtime.methods import Taau
 from volsr_core.temporal.ground_truth import supersampled_truth
 from volsr_core.temporal.layered import LayeredUpsampler
@@ -35,8 +35,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("config", type=Path, help="a dataset config, e.g. training/configs/dataset_motion.yaml")
     args = parser.parse_args()
-    meta = {p.key: p.value for p in onnx.load(str(MODEL)).metadata_props}
-    weights, bias = read_filter_metadata(meta[FILTER_KEY], MODEL, 5)
+    weights, bias = OnnxEngine(MODEL).base_filter  # XS 4x's filter, as the upscaler runs it
     config = read_config(args.config)
     width, height = config.hr_size
     print("| video | split | volume | output px a voxel | layered TAAU never / fine | XS 4x never / fine |")
