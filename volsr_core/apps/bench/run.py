@@ -14,7 +14,8 @@ run, interleaved frame by frame (the order rotating per frame, so machine noise 
 all of them :mod:`volsr_core.runtime.methods`.
 
 Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per
-pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image). Quality is averaged over the
+pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image; the scored pass's images are kept and scored
+after it, on every core, so no scoring runs between the methods' frames). Quality is averaged over the
 frames after ``warmup`` warm-up frames; times are medians over the same frames of ``timing_passes``
 passes over the orbit: the scored one and ``timing_passes - 1`` more with fresh methods (their histories
 empty again), timed and not scored (the warm-up also absorbs kernel compilation). A method's time on this
@@ -213,7 +214,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
 
     ``timing_passes``: fresh method lists (the same methods, in the same order, each built anew) for the passes
     after the scored one, taken one at a time (a generator builds each only when its pass starts)."""
-    from volsr_core.sr.metrics import psnr_ssim
+    from volsr_core.sr.metrics import psnr_ssim_many
     from volsr_core.temporal.ground_truth import supersampled_truth
 
     width, height = size
@@ -225,6 +226,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
         if progress is not None:
             progress.update()
     records = [{"render": [], "network": [], "readback": [], "psnr": [], "ssim": [], "passes": []} for _ in methods]
+    kept: list[tuple[int, np.ndarray, np.ndarray]] = []  # the scored pass's images, scored after it
 
     def timed(i: int, t: int, frame) -> None:
         rec = records[i]
@@ -234,9 +236,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
 
     def scored(i: int, t: int, frame) -> None:
         timed(i, t, frame)
-        psnr, ssim = psnr_ssim(frame.image[:height, :width], truth[t], channel_axis=-1)
-        records[i]["psnr"].append(psnr)
-        records[i]["ssim"].append(ssim)
+        kept.append((i, np.array(frame.image[:height, :width]), truth[t]))  # a copy: a method may reuse its buffer
 
     def end_pass() -> None:
         for rec in records:
@@ -244,6 +244,10 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
 
     _one_pass(methods, cameras, warmup, 0, scored, progress)
     end_pass()
+    for (i, _, _), (psnr, ssim) in zip(kept, psnr_ssim_many([(image, t) for _, image, t in kept], channel_axis=-1)):
+        records[i]["psnr"].append(psnr)
+        records[i]["ssim"].append(ssim)
+    kept.clear()
     for turn, fresh in enumerate(timing_passes, start=1):
         if [m.label for m in fresh] != [m.label for m in methods]:
             raise ValueError("a timing pass must run the scored pass's methods, in its order")
