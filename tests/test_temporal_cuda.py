@@ -74,14 +74,56 @@ SCRIPT = textwrap.dedent("""
         for clip in (False, True):
             close(f"filter of {n}, clip {clip}", filter_image(image, weights, bias, clip_output=clip),
                   device.filter(image, clip_output=clip).copy_to_host(), tol=1e-5)
+
+    # the motion flag stays on the device, never zeroed: each call's stamp tells this frame's answer from the last's
+    from numba import cuda
+    from volsr_core.temporal.cuda import MotionFlag
+
+    still = np.zeros((4, 5, 2), np.float32)
+    moving = still.copy()
+    moving[3, 4, 1] = 0.01
+    flag = MotionFlag()
+    answers = [flag(cuda.to_device(m), 0) for m in (moving, still, still, moving, moving, still)]
+    assert answers == [True, False, False, True, True, False], answers
+    # an estimate written into a kept array must fit it
+    taau = CudaTemporalUpsampler(2)
+    kept = cuda.device_array((2 * h, 2 * w, 3), dtype=np.float32)
+    colour, motion = rng.random((h, w, 3), dtype=np.float32), np.zeros((h, w, 2), np.float32)
+    assert taau(colour, motion, (0.0, 0.0), out=kept) is kept
+    try:
+        taau(colour, motion, (0.0, 0.0), out=cuda.device_array((h, w, 3), dtype=np.float32))
+    except ValueError as err:
+        assert "shape" in str(err), err
+    else:
+        raise AssertionError("an out of the wrong shape was taken")
 """)
 
 PIPELINE = textwrap.dedent("""
     import numpy as np
+    from numba import cuda
     from volsr_core.io import make_phantom
     from volsr_core.runtime.pipeline import Pipeline
     from volsr_core.scene import Camera, Volume, get_preset
     from volsr_core.scene.camera_paths import orbit
+
+    # the device arrays the upscaler makes and the host arrays it uploads while it upscales a frame: each such call
+    # costs a few tenths of a ms on a GPU (docs/performance-gpu.md), so they are made once and kept between frames
+    made, counting = {"device_array": 0, "to_device": 0}, [False]
+    for name in made:
+        def counted(*args, _original=getattr(cuda, name), _name=name, **kwargs):
+            made[_name] += counting[0]
+            return _original(*args, **kwargs)
+        setattr(cuda, name, counted)
+
+    def counted_upscale(upscale):
+        def call(*args, **kwargs):
+            made.update(device_array=0, to_device=0)
+            counting[0] = True
+            try:
+                return upscale(*args, **kwargs)
+            finally:
+                counting[0] = False
+        return call
 
     volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
     cameras = orbit(Camera.framing(volume.bounds), 3, degrees=3.0)
@@ -91,6 +133,7 @@ PIPELINE = textwrap.dedent("""
                        device="cuda")
         assert gpu.upscaler.on_device and not cpu.upscaler.on_device
         assert gpu.slabs == cpu.slabs == (scale // stretch // 2 - 1) * 2
+        gpu.upscaler.upscale = counted_upscale(gpu.upscaler.upscale)
         for k, camera in enumerate(cameras):
             a, b = cpu.render(camera), gpu.render(camera)
             assert isinstance(b, np.ndarray) and b.shape == a.shape == (size[1], size[0], 3)
@@ -98,6 +141,8 @@ PIPELINE = textwrap.dedent("""
             print(f"XS {scale // stretch}x in {gpu.slabs} slabs, stretched {stretch}x, frame {k}: "
                   f"max abs difference {err:.2e}")
             assert err < 1e-4 and a.std() > 0.01, (err, a.std())
+        # the third frame, once the histories swap: the filter's output is the one array made, and nothing uploaded
+        assert made == {"device_array": 1, "to_device": 0}, made
         assert gpu.last_timings["readback_ms"] > 0.0 == cpu.last_timings["readback_ms"]  # timed apart, on the GPU
         lr = gpu.last_low_resolution
         assert not lr.on_device and np.abs(lr.data - cpu.last_low_resolution.data).max() < 1e-4
@@ -163,7 +208,8 @@ def test_cuda_temporal_kernels_match_the_cpu_kernels():
 def test_the_xs_pipeline_on_the_device_gives_the_cpu_pipelines_images():
     """VolSR XS with ``device="cuda"``: frame, TAAU (2x) or layered TAAU (4x) and filter on the device (and the
     stretch of XS 2x + bicubic 2x), one image back; the images of the CPU pipeline, frame by frame, and the LR frame
-    there when asked for."""
+    there when asked for; once its histories swap, the upscaler makes one device array a frame (the filter's output)
+    and uploads nothing."""
     assert run_script(PIPELINE).count("max abs difference") == 3 * 3
 
 
@@ -260,8 +306,8 @@ def test_the_device_kernels_compile_for_a_gpu():
     info = np.zeros((2, 8, 8, 11), np.float32)
     layered = np.zeros((2, 16, 16, 5), np.float32)
     f32 = np.float32(1.0)
-    calls = [(tc._flag_motion, (motion, 0, 1e-3, flag)),
-             (tc._flag_motion, (slabs.reshape(16, 8, SLAB_CHANNELS), 4, 1e-3, flag)),
+    calls = [(tc._flag_motion, (motion, 0, 1e-3, 7, flag)),  # the stamp an int, as MotionFlag passes it
+             (tc._flag_motion, (slabs.reshape(16, 8, SLAB_CHANNELS), 4, 1e-3, 7, flag)),
              (tc._taau_prepass, (colour, motion, 2, 0.5, box)),
              (tc._taau_pixels, (history, True, colour, motion, depth, box, 2, 0.1, 0.2, 8.0, 0.5, 1.0, 0.1, True, hr3,
                                 history)),

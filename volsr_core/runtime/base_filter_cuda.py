@@ -114,12 +114,30 @@ def _gather_every_nth(array, step, sample):
             sample[j, i, c] = array[j * step, i * step, c]
 
 
-def every_nth(array, step: int) -> np.ndarray:
+class DeviceScratch:
+    """Device arrays kept between frames by name, made anew only when the shape changes: the device's
+    :class:`~volsr_core.runtime.base_filter.Scratch` (an allocation costs about 0.16 ms a 40 MB buffer on the lent
+    H200, docs/performance-gpu.md). One per caller."""
+
+    def __init__(self) -> None:
+        self._buffers: dict[str, object] = {}
+
+    def get(self, name: str, shape: tuple[int, ...], dtype: type = np.float32):
+        """The device array ``name`` of ``shape`` (contents undefined)."""
+        buffer = self._buffers.get(name)
+        if buffer is None or tuple(buffer.shape) != shape or buffer.dtype != dtype:
+            buffer = self._buffers[name] = cuda.device_array(shape, dtype=dtype)
+        return buffer
+
+
+def every_nth(array, step: int, scratch: DeviceScratch | None = None) -> np.ndarray:
     """``array[::step, ::step]`` of an (h, w, C) float32 device array (a strided view of a frame's buffer, say),
     gathered on the device and copied to the host: what a statistic over a sample of the frame needs, without the
-    frame's other channels and pixels travelling (a strided view's copy would bring its whole span)."""
+    frame's other channels and pixels travelling (a strided view's copy would bring its whole span). ``scratch``
+    keeps the sample's device buffer between calls."""
     rows, cols = (array.shape[0] + step - 1) // step, (array.shape[1] + step - 1) // step
-    sample = cuda.device_array((rows, cols, array.shape[2]), dtype=np.float32)
+    shape = (rows, cols, array.shape[2])
+    sample = cuda.device_array(shape, dtype=np.float32) if scratch is None else scratch.get("every_nth", shape)
     _gather_every_nth[_blocks(cols, rows), THREADS](array, step, sample)
     return sample.copy_to_host()
 
@@ -135,13 +153,7 @@ class CudaBaseFilter:
         self.weights = cuda.to_device(weights)
         self.bias = cuda.to_device(np.ascontiguousarray(np.reshape(bias, (weights.shape[0], -1)), dtype=np.float32))
         self._luma_weights, self._smoothing = cuda.to_device(LUMA), cuda.to_device(SMOOTHING)
-        self._buffers: dict[str, object] = {}
-
-    def _buffer(self, name: str, shape: tuple[int, ...], dtype=np.float32):
-        buffer = self._buffers.get(name)
-        if buffer is None or tuple(buffer.shape) != shape:
-            buffer = self._buffers[name] = cuda.device_array(shape, dtype=dtype)
-        return buffer
+        self._scratch = DeviceScratch()
 
     def filter(self, image, clip_output: bool = False):
         """The filtered image (a new (H, W, 3) float32 device array); ``clip_output`` clips it to [0, 1]."""
@@ -149,9 +161,9 @@ class CudaBaseFilter:
             image = cuda.to_device(np.ascontiguousarray(image, dtype=np.float32))
         height, width = image.shape[:2]
         blocks = _blocks(width, height)
-        second = self._buffer("second", (height, width), np.uint8)
+        second = self._scratch.get("second", (height, width), np.uint8)
         if self.pair:
-            luma, across = self._buffer("luma", (height, width)), self._buffer("across", (height, width))
+            luma, across = self._scratch.get("luma", (height, width)), self._scratch.get("across", (height, width))
             _luma[blocks, THREADS](image, self._luma_weights, luma)
             _smooth_across[blocks, THREADS](luma, self._smoothing, across)
             _pick_second[blocks, THREADS](across, self._smoothing, second)

@@ -141,11 +141,12 @@ class StatefulUpscaler:
         self.on_device = device == "cuda" and self.base_filter is not None and takes_slabs(engine)
         # the layered TAAU on the frames' slabs, or the TAAU on their colour, whichever the model was fitted on
         self.history = HistoryFeed(self.config, slabs=self.slabs, device="cuda" if self.on_device else "cpu")
-        self._device_filter = None
+        self._device_filter = self._device_scratch = None
         if self.on_device:
-            from volsr_core.runtime.base_filter_cuda import CudaBaseFilter
+            from volsr_core.runtime.base_filter_cuda import CudaBaseFilter, DeviceScratch
 
             self._device_filter = CudaBaseFilter(*self.base_filter)
+            self._device_scratch = DeviceScratch()  # on the GPU: TAAU's estimate, the camera-cut check's sample
         self._scratch = Scratch()  # work buffers kept between frames: the base filter's, the network's history
         self.resets = 0
         self.last_reset_reason = ""
@@ -165,7 +166,7 @@ class StatefulUpscaler:
         if hasattr(motion, "copy_to_host"):  # on the GPU: only the sample travels
             from volsr_core.runtime.base_filter_cuda import every_nth
 
-            sample = every_nth(motion, step)
+            sample = every_nth(motion, step, self._device_scratch)
         else:
             sample = motion[::step, ::step]
         squared_median, offscreen = _motion_statistics(sample, step, h, w)
@@ -229,9 +230,11 @@ class StatefulUpscaler:
         rotation = view_rotation(frame.camera, frame.previous_camera)
         # the layered TAAU is told the pixels per voxel whatever the model's TAAU is told: XS 4x's filter on the told
         # layered estimate beat it on the untold one by 0.7-1.9 dB at 1024² (docs/temporal.md, "Layered history")
-        # on the CPU the estimate goes into a buffer kept between frames: the filter reads it and keeps nothing
-        estimate = None if self.on_device or self.history.taau is None else self._scratch.get(
-            "estimate", (colour.shape[0] * self.config.scale, colour.shape[1] * self.config.scale, 3))
+        # the estimate goes into a buffer kept between frames (on the GPU where the frame is): the filter reads it and
+        # keeps nothing
+        shape = (colour.shape[0] * self.config.scale, colour.shape[1] * self.config.scale, 3)
+        scratch = self._device_scratch if self.on_device else self._scratch
+        estimate = None if self.history.taau is None else scratch.get("estimate", shape)
         base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth, rotation, frame.pixels_per_voxel,
                             slabs=frame.slabs, background=background, out=estimate)
         if self._device_filter is not None:

@@ -114,25 +114,20 @@ class HistoryFeed:
         """This frame's history as the (H, W, c) images whose channels, one after the other, make it (None for
         none): the estimate, then, with ``taau_aux``, what its blend threw away. The same call as the feed
         itself, for a caller that lays them out its own way without first joining them (a 7-channel copy).
-        ``out``: an (H, W, 3) float32 array the TAAU (on the CPU) writes its estimate into, for a caller done with
-        the last one (else each estimate is a new array)."""
+        ``out``: an (H, W, 3) float32 array (a device array on the GPU) the TAAU writes its estimate into, for a
+        caller done with the last one (else each estimate is a new array)."""
         estimate = None
         if self.slabs and self.mode == "taau":  # told the pixels per voxel always, as the upscaler runs it
             if slabs is None or np.shape(slabs)[0] != self.slabs:
                 raise ValueError(f"the layered TAAU of {self.slabs} depth slabs takes each frame's slabs, got "
                                  f"{None if slabs is None else np.shape(slabs)}")
-            estimate = [self.taau(slabs, jitter, background, rotation, pixels_per_voxel, **self._into(out))]
+            estimate = [self.taau(slabs, jitter, background, rotation, pixels_per_voxel, out=out)]
         elif self.taau is not None:
             estimate = [self.taau(colour, motion, jitter, depth, rotation,
-                                  pixels_per_voxel if self.fine_sampling else None, **self._into(out))]
+                                  pixels_per_voxel if self.fine_sampling else None, out=out)]
             if self.taau_aux:
                 estimate.append(self.taau.last_aux)
         return pick_history(self.mode, None if self.previous is None else [self.previous], estimate)
-
-    @staticmethod
-    def _into(out: np.ndarray | None) -> dict:
-        """The TAAU's ``out`` keyword for ``out`` (none without one: the CUDA upsamplers take none)."""
-        return {} if out is None else {"out": out}
 
     def keep(self, output: np.ndarray) -> None:
         """The network's output for the frame just fed, (H, W, 3)."""

@@ -1,7 +1,9 @@
 """TAAU and the layered TAAU as CUDA kernels (numba-cuda): the CPU kernels' steps, a thread per pixel, on device arrays.
 
 A frame the CUDA ray caster rendered can stay on the device through the temporal upsampling: the histories, the
-prepass boxes and the output live there, and only a flag (does anything move?) travels back per frame. The per-pixel
+prepass boxes and the output live there, and only a flag (does anything move?) travels back per frame: 2 kernel
+launches, one 4-byte copy back and, without ``out``, one allocation a frame (each call from the host costs a few
+hundredths to tenths of a ms there, docs/performance-gpu.md). The per-pixel
 maths are the stages of :mod:`volsr_core.temporal.stages`, compiled here for CUDA as the CPU kernels compile them
 for the CPU; the steps are those of :class:`~volsr_core.temporal.taau.TemporalUpsampler` and
 :class:`~volsr_core.temporal.layered.LayeredUpsampler` (their docstrings), whose settings these classes inherit.
@@ -42,21 +44,32 @@ def _blocks(width: int, height: int) -> tuple[int, int]:
 
 
 @cuda.jit
-def _flag_motion(motion, first, eps, flag):
-    """``flag[0]`` = 1 where any vector of ``motion`` (rows, w, C), channels ``first`` and ``first + 1``, has a
-    component of at least ``eps`` (``flag`` zeroed before)."""
+def _flag_motion(motion, first, eps, stamp, flag):
+    """``flag[0]`` = ``stamp`` where any vector of ``motion`` (rows, w, C), channels ``first`` and ``first + 1``, has
+    a component of at least ``eps``."""
     x, y = cuda.grid(2)
     if y < motion.shape[0] and x < motion.shape[1]:
         if abs(motion[y, x, first]) >= eps or abs(motion[y, x, first + 1]) >= eps:
-            flag[0] = 1
+            flag[0] = stamp
 
 
-def _moves(motion, first: int) -> bool:
-    """Whether any vector moves (channels ``first``, ``first + 1`` of device array ``motion`` (rows, w, C)): the
-    device's answer to the CPU classes' ``_moves``, one int32 copied back."""
-    flag = cuda.to_device(np.zeros(1, dtype=np.int32))
-    _flag_motion[_blocks(motion.shape[1], motion.shape[0]), THREADS](motion, first, _MOVES_EPS, flag)
-    return bool(flag.copy_to_host()[0])
+class MotionFlag:
+    """Whether any vector of a frame moves, the device's answer to the CPU classes' ``_moves``: one launch and one
+    int32 copied back. The flag stays on the device between calls and each call's kernel writes that call's own stamp,
+    so it needs no zeroing (an upload of its own, about 0.2 ms on the lent H200) before the next."""
+
+    def __init__(self) -> None:
+        self._flag = None
+        self._stamp = 0
+
+    def __call__(self, motion, first: int) -> bool:
+        """For channels ``first``, ``first + 1`` of device array ``motion`` (rows, w, C)."""
+        if self._flag is None:
+            self._flag = cuda.to_device(np.zeros(1, dtype=np.int32))
+        self._stamp = self._stamp % np.iinfo(np.int32).max + 1  # 1, 2, ...: never the flag's first 0
+        _flag_motion[_blocks(motion.shape[1], motion.shape[0]), THREADS](motion, first, _MOVES_EPS, self._stamp,
+                                                                         self._flag)
+        return int(self._flag.copy_to_host()[0]) == self._stamp
 
 
 def _device(array, dtype=np.float32):
@@ -64,6 +77,17 @@ def _device(array, dtype=np.float32):
     if hasattr(array, "copy_to_host"):  # a device array (numba's, or the simulator's)
         return array
     return cuda.to_device(np.ascontiguousarray(array, dtype=dtype))
+
+
+def _output(out, shape: tuple[int, ...]):
+    """The (H, W, 3) float32 device array an upsampler writes its estimate into: ``out`` when given (a ValueError
+    unless it is a device array of ``shape``), else a new one."""
+    if out is None:
+        return cuda.device_array(shape, dtype=np.float32)
+    if not hasattr(out, "copy_to_host") or tuple(out.shape) != shape or out.dtype != np.float32:
+        raise ValueError(f"out must be a float32 device array of shape {shape}, got {type(out).__name__} "
+                         f"{getattr(out, 'dtype', None)} {tuple(getattr(out, 'shape', ()))}")
+    return out
 
 
 # -- TAAU ---------------------------------------------------------------------------------------------------------
@@ -153,10 +177,12 @@ class CudaTemporalUpsampler(TemporalUpsampler):
 
     def __init__(self, scale: int, **settings):
         super().__init__(scale, **{**settings, "side_outputs": False})
+        self._moving = MotionFlag()
 
     def __call__(self, lr_color, lr_motion, jitter: tuple[float, float], depth=None, rotation: float | None = None,
-                 pixels_per_voxel: float | None = None):
-        """As :meth:`TemporalUpsampler.__call__`; returns a new (h * scale, w * scale, 3) float32 device array."""
+                 pixels_per_voxel: float | None = None, *, out=None):
+        """As :meth:`TemporalUpsampler.__call__`; returns a new (h * scale, w * scale, 3) float32 device array, or
+        ``out`` (a device array of that shape) written with it."""
         lr, motion = _device(lr_color), _device(lr_motion)
         if len(lr.shape) != 3 or lr.shape[2] != 3 or tuple(motion.shape) != tuple(lr.shape[:2]) + (2,):
             raise ValueError(f"expected colour (h, w, 3) and motion (h, w, 2), got {lr.shape} and {motion.shape}")
@@ -172,13 +198,13 @@ class CudaTemporalUpsampler(TemporalUpsampler):
         shape = (h * s, w * s, 5)
         has = self.history is not None and tuple(self.history.shape) == shape
         history = self.history if has else cuda.device_array((1, 1, 5), dtype=np.float32)
-        static, _, sigma, cap, tent = self._frame_settings(_moves(motion, 0), has, rotation, pixels_per_voxel)
+        static, _, sigma, cap, tent = self._frame_settings(self._moving(motion, 0), has, rotation, pixels_per_voxel)
         if self._box is None or tuple(self._box.shape[:2]) != (h, w):
             self._box = cuda.device_array((h, w, 8), dtype=np.float32)
         _taau_prepass[_blocks(w, h), THREADS](lr, motion, s, self.dis_motion, self._box)
         new_history = self._spare if self._spare is not None and tuple(self._spare.shape) == shape else \
             cuda.device_array(shape, dtype=np.float32)
-        out = cuda.device_array(shape[:2] + (3,), dtype=np.float32)
+        out = _output(out, shape[:2] + (3,))
         _taau_pixels[_blocks(w * s, h * s), THREADS](history, has, lr, motion, depth_arr, self._box, s, jx, jy,
                                                     1.0 / (2.0 * sigma * sigma), tent, cap, disocclusion, not static,
                                                     out, new_history)
@@ -277,9 +303,22 @@ class CudaLayeredUpsampler(LayeredUpsampler):
     """:class:`~volsr_core.temporal.layered.LayeredUpsampler` on the GPU: the same settings and steps, its histories,
     slabs and output device arrays (host arrays are copied there)."""
 
+    def __init__(self, scale: int, **settings):
+        super().__init__(scale, **settings)
+        self._moving = MotionFlag()
+        self._background: tuple[tuple[float, ...], object] | None = None  # (the RGB, it on the device)
+
+    def _device_background(self, background) -> object:
+        """``background`` as a device array, uploaded only when it changes (an upload costs about 0.2 ms)."""
+        key = tuple(float(c) for c in background)
+        if self._background is None or self._background[0] != key:
+            self._background = key, cuda.to_device(np.asarray(key, dtype=np.float32))
+        return self._background[1]
+
     def __call__(self, lr_slabs, jitter: tuple[float, float], background=(0.0, 0.0, 0.0),
-                 rotation: float | None = None, pixels_per_voxel: float | None = None):
-        """As :meth:`LayeredUpsampler.__call__`; returns a new (h * scale, w * scale, 3) float32 device array."""
+                 rotation: float | None = None, pixels_per_voxel: float | None = None, *, out=None):
+        """As :meth:`LayeredUpsampler.__call__`; returns a new (h * scale, w * scale, 3) float32 device array, or
+        ``out`` (a device array of that shape) written with it."""
         slabs = _device(lr_slabs)
         if len(slabs.shape) != 4 or slabs.shape[3] != SLAB_CHANNELS or slabs.shape[0] < 1:
             raise ValueError(f"expected slabs (K, h, w, {SLAB_CHANNELS}), got {slabs.shape}")
@@ -289,7 +328,7 @@ class CudaLayeredUpsampler(LayeredUpsampler):
         shape = (n_slabs, h * s, w * s, 5)
         has = self.history is not None and tuple(self.history.shape) == shape
         history = self.history if has else cuda.device_array((1, 1, 1, 5), dtype=np.float32)
-        moves = _moves(slabs.reshape(n_slabs * h, w, SLAB_CHANNELS), SLAB_MOTION)
+        moves = self._moving(slabs.reshape(n_slabs * h, w, SLAB_CHANNELS), SLAB_MOTION)
         static, still, sigma, cap, tent = self._frame_settings(moves, has, rotation, pixels_per_voxel)
         rectify = self._rectifies(static, still, pixels_per_voxel)
         if self._info is None or tuple(self._info.shape[:3]) != (n_slabs, h, w):
@@ -297,11 +336,10 @@ class CudaLayeredUpsampler(LayeredUpsampler):
         _layered_prepass[_blocks(w, h), THREADS](slabs, rectify, self._info)
         new_history = self._spare if self._spare is not None and tuple(self._spare.shape) == shape else \
             cuda.device_array(shape, dtype=np.float32)
-        out = cuda.device_array((h * s, w * s, 3), dtype=np.float32)
+        out = _output(out, (h * s, w * s, 3))
         _layered_pixels[_blocks(w * s, h * s), THREADS](history, has, slabs, self._info, s, jx, jy,
                                                        1.0 / (2.0 * sigma * sigma), tent, cap, rectify,
-                                                       cuda.to_device(np.asarray(background, dtype=np.float32)), out,
-                                                       new_history)
+                                                       self._device_background(background), out, new_history)
         self._spare = self.history if has else None
         self.history = new_history
         return out
