@@ -30,7 +30,7 @@ from volsr_core.dataset.store import frame_pixels_per_voxel, view_rotations
 from volsr_core.runtime.methods import ReducedSize, Taau
 from volsr_core.sr.history import HistoryFeed
 from volsr_core.sr.loader import SequenceDataset, slabs_mismatch
-from volsr_core.sr.metrics import psnr_ssim
+from volsr_core.sr.metrics import psnr_ssim_many
 from volsr_core.sr.network import SuperResolutionNet
 from volsr_core.temporal.resample import upscale_bilinear
 from volsr_core.temporal.warp import backward_warp
@@ -150,7 +150,7 @@ def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str
         video: dict[str, Any] = {"volume": meta["volume"], "frames": ts}
         for name in names:
             outputs = {t: methods[name](t) for t in ts}
-            scores = [psnr_ssim(outputs[t], frames.hr[t], channel_axis=-1) for t in ts]
+            scores = psnr_ssim_many([(outputs[t], frames.hr[t]) for t in ts], channel_axis=-1)
             temporal = [temporal_error(outputs[a], outputs[b], frames.hr[a], frames.hr[b],
                                        frames.hr_motion(b, cfg.scale)) for a, b in zip(ts, ts[1:])]
             video[name] = {"psnr": [s[0] for s in scores], "ssim": [s[1] for s in scores], "temporal": temporal}
