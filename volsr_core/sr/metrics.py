@@ -23,6 +23,6 @@ def psnr_ssim_many(pairs: Iterable[tuple[np.ndarray, np.ndarray]], channel_axis:
     """:func:`psnr_ssim` of each (prediction, target) pair, in order, on ``workers`` threads (default: one a core).
 
     The same numbers as one call after another: scikit-image's filters and NumPy release the GIL, so the threads
-    share the cores (a 2048² frame's SSIM takes about 2 s on one)."""
+    share the cores (a 2048² frame's SSIM takes about 3 s on one)."""
     with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
         return list(pool.map(lambda pair: psnr_ssim(*pair, channel_axis=channel_axis), pairs))

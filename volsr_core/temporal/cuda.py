@@ -1,7 +1,7 @@
 """TAAU and the layered TAAU as CUDA kernels (numba-cuda): the CPU kernels' steps, a thread per pixel, on device arrays.
 
 A frame the CUDA ray caster rendered can stay on the device through the temporal upsampling: the histories, the
-prepass boxes and the output live there, and only a flag (does anything move?) travels back per frame: 2 kernel
+prepass boxes and the output live there, and only a flag (does anything move?) travels back per frame: 3 kernel
 launches, one 4-byte copy back and, without ``out``, one allocation a frame (each call from the host costs a few
 hundredths to tenths of a ms there, docs/performance-gpu.md). The per-pixel
 maths are the stages of :mod:`volsr_core.temporal.stages`, compiled here for CUDA as the CPU kernels compile them
