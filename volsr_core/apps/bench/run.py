@@ -244,10 +244,14 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
 
     _one_pass(methods, cameras, warmup, 0, scored, progress)
     end_pass()
+    if progress is not None:  # a minute or more at 1024² on two cores, between two passes' renders
+        progress.set_postfix_str(f"{bench_volume.name}: scoring {len(kept)} images")
     for (i, _, _), (psnr, ssim) in zip(kept, psnr_ssim_many([(image, t) for _, image, t in kept], channel_axis=-1)):
         records[i]["psnr"].append(psnr)
         records[i]["ssim"].append(ssim)
     kept.clear()
+    if progress is not None:
+        progress.set_postfix_str(bench_volume.name)
     for turn, fresh in enumerate(timing_passes, start=1):
         if [m.label for m in fresh] != [m.label for m in methods]:
             raise ValueError("a timing pass must run the scored pass's methods, in its order")
