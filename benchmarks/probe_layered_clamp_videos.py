@@ -46,7 +46,7 @@ def main() -> None:
             source = (plan.volume_index, load_dataset_volume(config, plan.volume_index))
         volume = source[1]
         cameras = camera_path(config, volume, plan)
-        ppv = [volume.caster.pixels_per_voxel(camera, width) for camera in cameras]
+        ppv = [volume.caster.pixels_per_voxel(camera, height) for camera in cameras]  # per image height
         if LayeredUpsampler(SCALE).smoothing(max(ppv) / SCALE) == 0.0:
             continue
         truth = [supersampled_truth(volume.caster, camera, t, width, height) for t, camera in enumerate(cameras)
