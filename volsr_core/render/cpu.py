@@ -4,6 +4,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from volsr_core.hashing import sources_sha256
+from volsr_core.render import layout, stages
 from volsr_core.render.stages import build_ray_program
 
 _STAGE = numba.njit(inline="always", fastmath=True, boundscheck=False, cache=True)
@@ -19,20 +21,31 @@ def _balanced_row(r, height):
     return r // 2 if r % 2 == 0 else half + r // 2
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
-def _render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
-    for r in numba.prange(out.shape[0]):
-        y = _balanced_row(r, out.shape[0])
-        for x in range(out.shape[1]):
-            march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+def _row_kernels(sources: str):
+    """The kernels of the two ray programs, over image rows; closures over ``sources``, the digest of the modules
+    whose stages and constants they compile in (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk
+    cache compiles them anew when those change."""
+
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
+        sources  # keys numba's disk cache on the stage modules (hashing.sources_sha256)
+        for r in numba.prange(out.shape[0]):
+            y = _balanced_row(r, out.shape[0])
+            for x in range(out.shape[1]):
+                march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def render_color_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
+        sources  # keys numba's disk cache on the stage modules (hashing.sources_sha256)
+        for r in numba.prange(out.shape[0]):
+            y = _balanced_row(r, out.shape[0])
+            for x in range(out.shape[1]):
+                march_color(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+
+    return render_rows, render_color_rows
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
-def _render_color_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
-    for r in numba.prange(out.shape[0]):
-        y = _balanced_row(r, out.shape[0])
-        for x in range(out.shape[1]):
-            march_color(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+_render_rows, _render_color_rows = _row_kernels(sources_sha256(stages, layout))
 
 
 def render_cpu(vol: np.ndarray, empty: np.ndarray, lut: np.ndarray, glut: np.ndarray, cam: np.ndarray,

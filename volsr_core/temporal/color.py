@@ -20,6 +20,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from volsr_core.hashing import sources_sha256
+from volsr_core.temporal import stages
 from volsr_core.temporal.stages import CPU_STAGES
 
 CLAMP_MODES = ("minmax", "variance")
@@ -81,16 +83,26 @@ def box_variance(ycocg: np.ndarray, x: int, y: int, gamma: float):
     return (m0 - d0, m1 - d1, m2 - d2), (m0 + d0, m1 + d1, m2 + d2)
 
 
-@numba.njit(fastmath=True, boundscheck=False, cache=True)
+@numba.njit(fastmath=True, boundscheck=False)  # cached as part of the kernel below, not apart
 def _ycocg_row(y: int, rgb: np.ndarray, ycocg: np.ndarray) -> None:
     for x in range(rgb.shape[1]):
         ycocg[y, x, 0], ycocg[y, x, 1], ycocg[y, x, 2] = to_ycocg(rgb[y, x, 0], rgb[y, x, 1], rgb[y, x, 2])
 
 
-@numba.njit(parallel=True, cache=True)
-def _ycocg_kernel(rgb: np.ndarray, ycocg: np.ndarray) -> None:
-    for y in numba.prange(rgb.shape[0]):
-        _ycocg_row(y, rgb, ycocg)
+def _ycocg_rows(sources: str):
+    """The conversion over rows; a closure over ``sources``, the digest of the stage module it compiles in
+    (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles it anew when that changes."""
+
+    @numba.njit(parallel=True, cache=True)
+    def kernel(rgb: np.ndarray, ycocg: np.ndarray) -> None:
+        sources  # keys numba's disk cache on the stage module (hashing.sources_sha256)
+        for y in numba.prange(rgb.shape[0]):
+            _ycocg_row(y, rgb, ycocg)
+
+    return kernel
+
+
+_ycocg_kernel = _ycocg_rows(sources_sha256(stages))
 
 
 def image_to_ycocg(rgb: np.ndarray) -> np.ndarray:

@@ -37,11 +37,15 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from volsr_core.hashing import sources_sha256
+from volsr_core.render import layout
 from volsr_core.render.layout import SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA
+from volsr_core.temporal import stages
 from volsr_core.temporal.stages import CPU_STAGES
 from volsr_core.temporal.taau import TemporalUpsampler, _moves, checked_jitter, output_image
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
+_INNER = dict(fastmath=True, boundscheck=False)  # helpers of the kernels below: cached as part of them, not apart
 _row_window, _splat_weights, _taps = CPU_STAGES.sample_window, CPU_STAGES.splat_weights, CPU_STAGES.bilinear_taps
 _EMPTY = 1e-4  # a slab with at most this alpha at an LR sample shows nothing there
 CLAMP_ROTATING = ("never", "fine", "always")  # where the history is clamped while the view rotates
@@ -80,26 +84,7 @@ def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, box, dst):
                 dst[k, j, i, 8], dst[k, j, i, 9], dst[k, j, i, 10] = mx, my, best
 
 
-@numba.njit(parallel=True, **_NB)
-def _prepass(slabs, box, across, info):
-    """Per slab and LR pixel of ``slabs`` (K, h, w, SLAB_CHANNELS): the 3x3 neighbourhood's RGBA min/max, the
-    motion vector the HR pixels nearest it take (its own where its slab shows something, else that of the most
-    opaque neighbour, the first in row order among equals) and whether any of the nine shows something, into
-    ``info`` (K, h, w, _INFO); the min/max only with ``box`` (a frame that rectifies: 0.47 against 0.27 ms for
-    two 128² slabs); separably (:func:`_widen`): three pixels of each row first (into the work buffer ``across``,
-    of ``info``'s shape), then three rows of those, then each pixel's own motion where it shows."""
-    _widen(slabs, SLAB_RGBA, SLAB_RGBA, SLAB_RGBA + 3, SLAB_MOTION, False, box, across)
-    _widen(across, 0, 4, 10, 8, True, box, info)
-    n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
-    for j in numba.prange(h):
-        for k in range(n_slabs):
-            for i in range(w):
-                if slabs[k, j, i, SLAB_RGBA + 3] > _EMPTY:
-                    info[k, j, i, 8], info[k, j, i, 9] = slabs[k, j, i, SLAB_MOTION], slabs[k, j, i, SLAB_MOTION + 1]
-                info[k, j, i, 10] = 1.0 if info[k, j, i, 10] > _EMPTY else 0.0
-
-
-@numba.njit(**_NB)
+@numba.njit(**_INNER)
 def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
          out, new_history, shown, acc):
     n_slabs, hr_h, hr_w = new_history.shape[0], new_history.shape[1], new_history.shape[2]
@@ -158,13 +143,51 @@ def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, te
             out[y, x, c] = acc[x, c] + behind * background[c]
 
 
-@numba.njit(parallel=True, **_NB)
-def _kernel(history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background, out,
-            new_history, shown):
-    for y in numba.prange(out.shape[0]):
-        acc = np.empty((out.shape[1], 4), dtype=np.float32)
-        _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
-             out, new_history, shown, acc)
+def _prepass_kernel(sources: str):
+    """The prepass; a closure over ``sources``, the digest of the layout module whose constants it compiles in
+    (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles it anew when that changes."""
+
+    @numba.njit(parallel=True, **_NB)
+    def prepass(slabs, box, across, info):
+        """Per slab and LR pixel of ``slabs`` (K, h, w, SLAB_CHANNELS): the 3x3 neighbourhood's RGBA min/max, the
+        motion vector the HR pixels nearest it take (its own where its slab shows something, else that of the most
+        opaque neighbour, the first in row order among equals) and whether any of the nine shows something, into
+        ``info`` (K, h, w, _INFO); the min/max only with ``box`` (a frame that rectifies: 0.47 against 0.27 ms for
+        two 128² slabs); separably (:func:`_widen`): three pixels of each row first (into the work buffer ``across``,
+        of ``info``'s shape), then three rows of those, then each pixel's own motion where it shows."""
+        sources  # keys numba's disk cache on the layout module (hashing.sources_sha256)
+        _widen(slabs, SLAB_RGBA, SLAB_RGBA, SLAB_RGBA + 3, SLAB_MOTION, False, box, across)
+        _widen(across, 0, 4, 10, 8, True, box, info)
+        n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
+        for j in numba.prange(h):
+            for k in range(n_slabs):
+                for i in range(w):
+                    if slabs[k, j, i, SLAB_RGBA + 3] > _EMPTY:
+                        info[k, j, i, 8] = slabs[k, j, i, SLAB_MOTION]
+                        info[k, j, i, 9] = slabs[k, j, i, SLAB_MOTION + 1]
+                    info[k, j, i, 10] = 1.0 if info[k, j, i, 10] > _EMPTY else 0.0
+
+    return prepass
+
+
+def _row_kernel(sources: str):
+    """The kernel over rows; a closure over ``sources``, the digest of the stage module it compiles in
+    (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles it anew when that changes."""
+
+    @numba.njit(parallel=True, **_NB)
+    def kernel(history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background, out,
+                new_history, shown):
+        sources  # keys numba's disk cache on the stage module (hashing.sources_sha256)
+        for y in numba.prange(out.shape[0]):
+            acc = np.empty((out.shape[1], 4), dtype=np.float32)
+            _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
+                 out, new_history, shown, acc)
+
+    return kernel
+
+
+_prepass = _prepass_kernel(sources_sha256(layout))
+_kernel = _row_kernel(sources_sha256(stages))
 
 
 class LayeredUpsampler(TemporalUpsampler):

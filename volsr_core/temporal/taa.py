@@ -12,12 +12,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from volsr_core.hashing import sources_sha256
+from volsr_core.temporal import color, stages
 from volsr_core.temporal.color import (
     check_options, clip_history, fetch_bilinear, fetch_catmull_rom, image_to_ycocg, on_screen,
 )
 
 
-@numba.njit(fastmath=True, boundscheck=False, cache=True)
+@numba.njit(fastmath=True, boundscheck=False)  # cached as part of the kernel below, not apart
 def _taa_row(y, history, current, ycocg, motion, weight, variance, gamma, catmull_rom, towards_centre, out):
     h, w = current.shape[0], current.shape[1]
     colour = np.empty(3, dtype=np.float32)
@@ -35,10 +37,20 @@ def _taa_row(y, history, current, ycocg, motion, weight, variance, gamma, catmul
             out[y, x, c] = weight * colour[c] + (1.0 - weight) * current[y, x, c]
 
 
-@numba.njit(parallel=True, cache=True)
-def _taa_kernel(history, current, ycocg, motion, weight, variance, gamma, catmull_rom, towards_centre, out):
-    for y in numba.prange(current.shape[0]):
-        _taa_row(y, history, current, ycocg, motion, weight, variance, gamma, catmull_rom, towards_centre, out)
+def _taa_rows(sources: str):
+    """The blend over rows; a closure over ``sources``, the digest of the modules whose stages it compiles in
+    (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles it anew when those change."""
+
+    @numba.njit(parallel=True, cache=True)
+    def kernel(history, current, ycocg, motion, weight, variance, gamma, catmull_rom, towards_centre, out):
+        sources  # keys numba's disk cache on the colour and stage modules (hashing.sources_sha256)
+        for y in numba.prange(current.shape[0]):
+            _taa_row(y, history, current, ycocg, motion, weight, variance, gamma, catmull_rom, towards_centre, out)
+
+    return kernel
+
+
+_taa_kernel = _taa_rows(sources_sha256(color, stages))
 
 
 class TemporalAntiAliasing:

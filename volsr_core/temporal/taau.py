@@ -50,9 +50,12 @@ import math
 import numba
 import numpy as np
 
+from volsr_core.hashing import sources_sha256
+from volsr_core.temporal import stages
 from volsr_core.temporal.stages import CPU_STAGES
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
+_INNER = dict(fastmath=True, boundscheck=False)  # helpers of the kernels below: cached as part of them, not apart
 _to_ycocg32, _row_window, _splat_weights = CPU_STAGES.to_ycocg32, CPU_STAGES.sample_window, CPU_STAGES.splat_weights
 _to_rgb = CPU_STAGES.to_rgb
 _catmull_rom_weights, _history_column = CPU_STAGES.catmull_rom_weights, CPU_STAGES.history_column
@@ -61,7 +64,7 @@ _nearest_depth, _history_weight = CPU_STAGES.nearest_depth, CPU_STAGES.history_w
 STILL_BELOW = 1e-6  # degrees: a view rotating less than this between frames is still (a still camera, a pan, a zoom)
 
 
-@numba.njit(**_NB)
+@numba.njit(**_INNER)
 def _column_box(lr, rows, i):
     """YCoCg min and max over LR pixels (rows[0..2], i): (lo0, lo1, lo2, hi0, hi1, hi2), converted in float32."""
     lo0 = lo1 = lo2 = np.float32(1e30)
@@ -73,7 +76,7 @@ def _column_box(lr, rows, i):
     return lo0, lo1, lo2, hi0, hi1, hi2
 
 
-@numba.njit(**_NB)
+@numba.njit(**_INNER)
 def _prepass_row(j, lr, motion, scale, dis_motion, box):
     """LR row j: YCoCg min/max of each 3x3 neighbourhood (box[..., 0:6]) and the parallax flag (box[..., 6]).
 
@@ -103,10 +106,6 @@ def _prepass_row(j, lr, motion, scale, dis_motion, box):
         box[j, i, 6] = 1.0 if scale * spread > dis_motion else 0.0
 
 
-@numba.njit(parallel=True, cache=True)
-def _prepass(lr, motion, scale, dis_motion, box):
-    for j in numba.prange(lr.shape[0]):
-        _prepass_row(j, lr, motion, scale, dis_motion, box)
 
 
 @numba.njit(**_NB)
@@ -120,7 +119,7 @@ def _moves(motion, eps):
     return False
 
 
-@numba.njit(**_NB)
+@numba.njit(**_INNER)
 def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
          rectify, out, new_history, keep_aux, aux):
     hr_h, hr_w = out.shape[0], out.shape[1]
@@ -210,12 +209,28 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                 aux[y, x, 3] = n / (n + a)  # ... and its share of the blend
 
 
-@numba.njit(parallel=True, cache=True)
-def _kernel(history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
-            rectify, out, new_history, keep_aux, aux):
-    for y in numba.prange(out.shape[0]):
-        _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
-             rectify, out, new_history, keep_aux, aux)
+def _kernels(sources: str):
+    """The prepass and the kernel over rows; closures over ``sources``, the digest of the stage module they compile in
+    (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles them anew when it changes."""
+
+    @numba.njit(parallel=True, cache=True)
+    def prepass(lr, motion, scale, dis_motion, box):
+        sources  # keys numba's disk cache on the stage module (hashing.sources_sha256)
+        for j in numba.prange(lr.shape[0]):
+            _prepass_row(j, lr, motion, scale, dis_motion, box)
+
+    @numba.njit(parallel=True, cache=True)
+    def kernel(history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
+               rectify, out, new_history, keep_aux, aux):
+        sources  # keys numba's disk cache on the stage module (hashing.sources_sha256)
+        for y in numba.prange(out.shape[0]):
+            _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap,
+                 disocclusion, rectify, out, new_history, keep_aux, aux)
+
+    return prepass, kernel
+
+
+_prepass, _kernel = _kernels(sources_sha256(stages))
 
 
 def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,165 @@
+"""Numba kernels cached on disk compile anew when a module whose code they compile in changes.
+
+Numba keys a kernel's disk cache (``cache=True``) on the kernel's own source file alone, so a kernel that inlines the
+ray program's or TAAU's stages from another module kept its old machine code after those stages changed (numba
+issue 1833). Such kernels close over :func:`~volsr_core.hashing.sources_sha256` of those modules, which numba hashes
+into the cache key; the helpers they call are not cached apart.
+"""
+from __future__ import annotations
+
+import ast
+import importlib
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+from types import ModuleType
+
+from numba.core.dispatcher import Dispatcher
+
+from volsr_core.hashing import sources_sha256
+
+PACKAGE = Path(__file__).resolve().parents[1] / "volsr_core"
+
+
+def _kernel_modules() -> list[ModuleType]:
+    """The package's modules that compile numba functions with a disk cache (those needing a GPU toolkit aside)."""
+    names = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if "cache=True" in path.read_text() and "cuda" not in path.stem:
+            names.append("volsr_core." + ".".join(path.relative_to(PACKAGE).with_suffix("").parts))
+    return [importlib.import_module(name) for name in names]
+
+
+def _imported_from(module_name: str) -> dict[str, str]:
+    """Names a module imports from other volsr_core modules (``from volsr_core.x import name``), to their module."""
+    tree = ast.parse(Path(sys.modules[module_name].__file__).read_text())
+    return {alias.asname or alias.name: node.module for node in ast.walk(tree)
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("volsr_core.")
+            for alias in node.names}
+
+
+def compiled_in(dispatcher: Dispatcher) -> set[str]:
+    """The volsr_core modules, other than the dispatcher's own, whose functions or constants its compiled code holds:
+    the jitted functions it calls (through globals and closures, transitively) and the names those read from other
+    volsr_core modules."""
+    home, found, seen = dispatcher.py_func.__module__, set(), set()
+
+    def walk(function) -> None:
+        if id(function) in seen:
+            return
+        seen.add(id(function))
+        py_func = function.py_func
+        imported, names = _imported_from(py_func.__module__), py_func.__code__.co_names
+        used = [py_func.__globals__[n] for n in names if n in py_func.__globals__]
+        used += [cell.cell_contents for cell in py_func.__closure__ or ()]
+        for name in names:
+            value = py_func.__globals__.get(name)
+            if imported.get(name, home) != home and not isinstance(value, (Dispatcher, ModuleType)):
+                found.add(imported[name])  # a constant from another module, compiled in as a literal
+        for value in used:
+            if isinstance(value, ModuleType) and value.__name__.startswith("volsr_core.") and value.__name__ != home:
+                found.add(value.__name__)
+            if isinstance(value, Dispatcher):
+                if value.py_func.__module__ != home:
+                    found.add(value.py_func.__module__)
+                walk(value)
+
+    walk(dispatcher)
+    return found
+
+
+def _cached_kernels() -> list[tuple[str, Dispatcher]]:
+    """(name, dispatcher) of every module-level numba function with a disk cache that is not always inlined (an
+    inlined one is compiled into its callers' code, from their source, and its own cache is never read for them)."""
+    kernels = []
+    for module in _kernel_modules():
+        for name, value in vars(module).items():
+            if (isinstance(value, Dispatcher) and value.py_func.__module__ == module.__name__
+                    and type(value._cache).__name__ != "NullCache" and value.targetoptions.get("inline") != "always"):
+                kernels.append((f"{module.__name__}.{name}", value))
+    return kernels
+
+
+def test_every_cached_kernel_is_keyed_on_the_modules_it_compiles_in():
+    kernels = dict(_cached_kernels())
+    for needed in ("volsr_core.render.cpu._render_rows", "volsr_core.temporal.taau._kernel",
+                   "volsr_core.temporal.layered._kernel", "volsr_core.temporal.taa._taa_kernel"):
+        assert needed in kernels, f"{needed} should be a cached kernel"
+    offences = []
+    for name, kernel in kernels.items():
+        modules = compiled_in(kernel)
+        if not modules:
+            continue
+        digest = sources_sha256(*(sys.modules[m] for m in modules))
+        cells = [cell.cell_contents for cell in kernel.py_func.__closure__ or ()]
+        if digest not in cells:
+            offences.append(f"{name} compiles in {', '.join(sorted(modules))} but does not close over their "
+                            "sources_sha256")
+    assert not offences, "\n".join(offences)
+    # the walk finds what a kernel compiles in: the ray program's stages and their layout constants
+    assert compiled_in(kernels["volsr_core.render.cpu._render_rows"]) == {"volsr_core.render.stages",
+                                                                        "volsr_core.render.layout"}
+    assert compiled_in(kernels["volsr_core.temporal.taa._taa_kernel"]) == {"volsr_core.temporal.color",
+                                                                         "volsr_core.temporal.stages"}
+
+
+def test_sources_sha256_is_of_the_set_of_sources():
+    import volsr_core.render.layout as layout
+    import volsr_core.render.stages as stages
+
+    assert sources_sha256(stages, layout) == sources_sha256(layout, stages, layout)
+    assert sources_sha256(stages, layout) != sources_sha256(stages)
+
+
+STAGE = """
+import numba
+
+
+@numba.njit(inline="always", cache=True)
+def step(x):
+    return x + {increment}
+"""
+
+KERNEL = """
+import numba
+import numpy as np
+
+from volsr_core.hashing import sources_sha256
+import stage
+
+
+def build(sources):
+    @numba.njit(parallel=True, cache=True)
+    def kernel(x, out):
+        sources
+        for i in numba.prange(x.shape[0]):
+            out[i] = stage.step(x[i])
+    return kernel
+
+
+kernel = build(sources_sha256(stage))
+out = np.empty(4)
+kernel(np.zeros(4), out)
+print(out[0], len(kernel.stats.cache_hits), len(kernel.stats.cache_misses))
+"""
+
+
+def test_a_kernel_keyed_on_its_stage_module_compiles_anew_when_that_changes(tmp_path):
+    """The pattern the package's kernels follow, end to end with numba's disk cache (in-tree ``__pycache__``): a
+    second run loads the kernel from the cache; after the stage module changes it compiles the new stage."""
+    (tmp_path / "kernel.py").write_text(KERNEL)
+
+    def run(increment: float) -> tuple[float, int, int]:
+        (tmp_path / "stage.py").write_text(textwrap.dedent(STAGE.format(increment=increment)))
+        env = {"PYTHONPATH": f"{tmp_path}:{PACKAGE.parent}", "PATH": "/usr/bin:/bin", "NUMBA_NUM_THREADS": "2",
+               "PYTHONDONTWRITEBYTECODE": "1"}  # no .pyc: one written in the same second would hide the new stage
+        result = subprocess.run([sys.executable, "kernel.py"], cwd=tmp_path, capture_output=True, text=True,
+                                env=env, timeout=300)
+        assert result.returncode == 0, result.stderr
+        value, hits, misses = result.stdout.split()
+        return float(value), int(hits), int(misses)
+
+    assert run(1.0) == (1.0, 0, 1)  # compiled and saved
+    assert run(1.0) == (1.0, 1, 0)  # loaded
+    assert run(2.0) == (2.0, 0, 1)  # the stage changed: compiled anew, not the old code loaded
