@@ -4,8 +4,8 @@ The methods (``results["methods"]``, in :data:`METHODS` order): "bilinear" (the 
 render upscaled, what VTK shows; version-2 stores only), the jittered LR frame upscaled bilinearly
 and bicubically, TAAU, for a network on the layered TAAU (``taau_slabs``) that TAAU's estimate
 ("layered TAAU", its base) and VolSR. Per video and frame t >= N (the frames the network can see N
-previous frames for): PSNR and SSIM from scikit-image against the HR ground truth, and a temporal-stability error: the mean
-absolute difference between the output's and the ground truth's frame-to-frame change after
+previous frames for): PSNR and SSIM from scikit-image against the HR ground truth, and a temporal-stability
+error: the mean absolute difference between the output's and the ground truth's frame-to-frame change after
 backward-warping frame t-1 onto t with the (upsampled) motion vectors, over pixels whose
 reprojection stays on screen. Lower is steadier; 0 means the output flickers exactly as the
 ground truth changes. The baselines are :mod:`volsr_core.runtime.methods`' upscaling stages on the
