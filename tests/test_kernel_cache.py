@@ -163,3 +163,26 @@ def test_a_kernel_keyed_on_its_stage_module_compiles_anew_when_that_changes(tmp_
     assert run(1.0) == (1.0, 0, 1)  # compiled and saved
     assert run(1.0) == (1.0, 1, 0)  # loaded
     assert run(2.0) == (2.0, 0, 1)  # the stage changed: compiled anew, not the old code loaded
+
+
+ONE_SIGNATURE = """
+from volsr_core.io import make_phantom
+from volsr_core.runtime.pipeline import Pipeline
+from volsr_core.scene import Camera, Volume, get_preset
+from volsr_core.temporal import taau
+
+volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
+pipeline = Pipeline(volume, get_preset("CT-Phantom"), scale=2, size=(32, 32), variant="XS", threads=2)
+camera = Camera.framing(volume.bounds)
+for degrees in (0, 2, 4):  # the first frame has no motion (a cut), the others do
+    pipeline.render(camera.azimuth(degrees))
+print(len(taau._prepass.signatures), len(taau._kernel.signatures), len(taau._moves.signatures))
+"""
+
+
+def test_a_pipelines_first_frame_and_the_next_run_taau_with_one_compiled_signature():
+    """The frame after a cut has no motion to follow; its zero vectors are strided as every frame's own, so that
+    TAAU's kernels compile once for both (a contiguous array compiled them a second time, 7 s at first use)."""
+    result = subprocess.run([sys.executable, "-c", ONE_SIGNATURE], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["1", "1", "1"]

@@ -48,6 +48,12 @@ def _motion_statistics(sample: np.ndarray, step: int, h: int, w: int) -> tuple[f
     return np.median(squared), off / (rows * cols)
 
 
+def _no_motion(shape: tuple[int, ...]) -> np.ndarray:
+    """Zero motion vectors of ``shape`` (h, w, 2), strided as a frame's own are (two channels of a wider buffer): a
+    contiguous array would have TAAU's kernels compiled a second time for its layout (7 s at first use, 2 cores)."""
+    return np.zeros(tuple(shape[:2]) + (3,), np.float32)[..., :2]
+
+
 def camera_jump(previous: Camera | None, camera: Camera, max_turn: float = 30.0, max_zoom: float = 2.0) -> str:
     """Why ``camera`` is a cut from ``previous`` rather than a drag ("" when it is not): a switched
     projection, a changed view angle, a turn of more than ``max_turn`` degrees, or a distance (parallel
@@ -225,7 +231,7 @@ class StatefulUpscaler:
         """:meth:`upscale` for a network that is only its base filter, run by the engine's CPU kernel
         (:func:`~volsr_core.runtime.base_filter.filter_image`) on TAAU's (H, W, 3) estimate as it comes."""
         colour = frame.color  # a view into the renderer's buffer, read in place by TAAU
-        motion = frame.motion if self._continues(frame, colour) else np.zeros(frame.motion.shape, np.float32)
+        motion = frame.motion if self._continues(frame, colour) else _no_motion(frame.motion.shape)
         self.frames.appendleft((colour, motion, np.asarray(frame.jitter, dtype=np.float32)))
         rotation = view_rotation(frame.camera, frame.previous_camera)
         # the layered TAAU is told the pixels per voxel whatever the model's TAAU is told: XS 4x's filter on the told
