@@ -11,6 +11,7 @@ $(STAMP):
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[dev,vtk,pyvista,torch,onnx,video]"
+	$(BIN)/volsr warmup  # numba's kernels compiled once, with a progress bar, not inside the first frame
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 

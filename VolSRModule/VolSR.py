@@ -290,6 +290,27 @@ class VolSRLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         """VolSR's Python packages installed (asking first) and volsr_core importable (VolSRLib.bootstrap)."""
         bootstrap.ensureDependencies()
 
+    kernelsCompiled = False  # in this Slicer session (class-wide: one logic per module reload, one cache per install)
+
+    def compileKernels(self) -> None:
+        """Numba compiles VolSR's kernels at their first use, about a minute on 2 cores after an install and a second
+        from its disk cache later (``volsr_core.runtime.warmup``): done once per Slicer session before VolSR's first
+        frame, under a wait cursor and a status message, instead of a silent pause in the 3D view's first render."""
+        if VolSRLogic.kernelsCompiled:
+            return
+        import qt
+        from volsr_core.runtime.warmup import compile_kernels
+
+        slicer.util.showStatusMessage("VolSR: compiling its kernels (about a minute after an install, then a second)")
+        qt.QApplication.setOverrideCursor(qt.Qt.WaitCursor)
+        try:
+            slicer.app.processEvents()
+            compile_kernels()
+        finally:
+            qt.QApplication.restoreOverrideCursor()
+            slicer.util.showStatusMessage("")
+        VolSRLogic.kernelsCompiled = True
+
     # the parameter node ------------------------------------------------------------------------------
     @staticmethod
     def settingsFrom(parameters: VolSRParameterNode) -> dict:
@@ -409,6 +430,7 @@ class VolSRLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         """Draw ``volumeNode`` with VolSR in the 3D view; returns the SlicerSession. ``scale`` and ``variant``
         None: a model file's own scale, else the shipped XS 2x (the defaults)."""
         self.ensureDependencies()
+        self.compileKernels()
         from volsr_core.hosts.slicer import SlicerSession
 
         self.disable()

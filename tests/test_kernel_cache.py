@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import ast
 import importlib
+import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -186,3 +188,41 @@ def test_a_pipelines_first_frame_and_the_next_run_taau_with_one_compiled_signatu
     result = subprocess.run([sys.executable, "-c", ONE_SIGNATURE], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     assert result.stdout.split() == ["1", "1", "1"]
+
+
+FIRST_FRAMES = """
+import json
+
+import numba.core.event as event
+
+from volsr_core.io import make_phantom
+from volsr_core.render import RayCaster
+from volsr_core.runtime.pipeline import Pipeline
+from volsr_core.scene import Camera, Volume, get_preset
+
+volume = Volume.from_record(make_phantom(shape=(40, 36, 32)))
+look = get_preset("CT-Bone")  # another look and other sizes than the warm-up's
+camera = Camera.framing(volume.bounds)
+with event.install_recorder("numba:compile") as recorder:
+    for settings in (dict(scale=2, size=(48, 40)), dict(scale=4, size=(96, 80)),
+                     dict(scale=4, stretch=2, size=(96, 80))):
+        pipeline = Pipeline(volume, look, variant="XS", threads=2, **settings)
+        for degrees in (0, 3, 6):
+            pipeline.render(camera.azimuth(degrees))
+    RayCaster(volume, look).render_color(camera, 40, 30)
+print(json.dumps(sorted({e.data["dispatcher"].py_func.__qualname__ for _, e in recorder.buffer})))
+"""
+
+
+def test_volsr_warmup_leaves_nothing_for_a_hosts_first_frames_to_compile(tmp_path):
+    """``volsr warmup`` into an empty numba cache; then a host's first frames (VolSR XS at 2x, 4x and stretched, a
+    native render, another look and other sizes) compile nothing: numba reports no compilation."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    warmup = subprocess.run([sys.executable, "-m", "volsr_core.cli", "warmup"], capture_output=True, text=True,
+                            env=env, timeout=900)
+    assert warmup.returncode == 0, warmup.stderr
+    assert "VolSR's kernels are in numba's disk cache" in warmup.stdout
+    assert any((tmp_path / "numba-cache").rglob("*.nbc")), "the kernels must be in the cache folder given"
+    first = subprocess.run([sys.executable, "-c", FIRST_FRAMES], capture_output=True, text=True, env=env, timeout=900)
+    assert first.returncode == 0, first.stderr
+    assert json.loads(first.stdout) == [], "compiled at a first frame after the warm-up"
