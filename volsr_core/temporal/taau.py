@@ -106,8 +106,6 @@ def _prepass_row(j, lr, motion, scale, dis_motion, box):
         box[j, i, 6] = 1.0 if scale * spread > dis_motion else 0.0
 
 
-
-
 @numba.njit(**_NB)
 def _moves(motion, eps):
     """Whether any vector of ``motion`` (h, w, 2) has a component of at least ``eps``: stops at the first,
