@@ -114,10 +114,19 @@ PIPELINE = textwrap.dedent("""
             made[_name] += counting[0]
             return _original(*args, **kwargs)
         setattr(cuda, name, counted)
+    # and whether it asks the device if anything moves, an answer the host waits for: only where it counts (a view
+    # of unknown rotation, or a still one with a history), not while the view rotates
+    from volsr_core.temporal.cuda import MotionFlag
+    asked, ask = [0], MotionFlag.__call__
+    def counted_ask(self, *args):
+        asked[0] += counting[0]
+        return ask(self, *args)
+    MotionFlag.__call__ = counted_ask
 
     def counted_upscale(upscale):
         def call(*args, **kwargs):
             made.update(device_array=0, to_device=0)
+            asked[0] = 0
             counting[0] = True
             try:
                 return upscale(*args, **kwargs)
@@ -143,6 +152,9 @@ PIPELINE = textwrap.dedent("""
             assert err < 1e-4 and a.std() > 0.01, (err, a.std())
         # the third frame, once the histories swap: the filter's output is the one array made, and nothing uploaded
         assert made == {"device_array": 1, "to_device": 0}, made
+        assert asked[0] == 0, "a rotating view needs no motion flag"
+        a, b = cpu.render(cameras[-1]), gpu.render(cameras[-1])  # the view held still: the flag says what moves
+        assert asked[0] == 1 and float(np.abs(a - b).max()) < 1e-4
         assert gpu.last_timings["readback_ms"] > 0.0 == cpu.last_timings["readback_ms"]  # timed apart, on the GPU
         lr = gpu.last_low_resolution
         assert not lr.on_device and np.abs(lr.data - cpu.last_low_resolution.data).max() < 1e-4

@@ -198,7 +198,8 @@ class CudaTemporalUpsampler(TemporalUpsampler):
         shape = (h * s, w * s, 5)
         has = self.history is not None and tuple(self.history.shape) == shape
         history = self.history if has else cuda.device_array((1, 1, 5), dtype=np.float32)
-        static, _, sigma, cap, tent = self._frame_settings(self._moving(motion, 0), has, rotation, pixels_per_voxel)
+        static, _, sigma, cap, tent = self._frame_settings(lambda: self._moving(motion, 0), has, rotation,
+                                                           pixels_per_voxel)
         if self._box is None or tuple(self._box.shape[:2]) != (h, w):
             self._box = cuda.device_array((h, w, 8), dtype=np.float32)
         _taau_prepass[_blocks(w, h), THREADS](lr, motion, s, self.dis_motion, self._box)
@@ -328,8 +329,9 @@ class CudaLayeredUpsampler(LayeredUpsampler):
         shape = (n_slabs, h * s, w * s, 5)
         has = self.history is not None and tuple(self.history.shape) == shape
         history = self.history if has else cuda.device_array((1, 1, 1, 5), dtype=np.float32)
-        moves = self._moving(slabs.reshape(n_slabs * h, w, SLAB_CHANNELS), SLAB_MOTION)
-        static, still, sigma, cap, tent = self._frame_settings(moves, has, rotation, pixels_per_voxel)
+        static, still, sigma, cap, tent = self._frame_settings(
+            lambda: self._moving(slabs.reshape(n_slabs * h, w, SLAB_CHANNELS), SLAB_MOTION), has, rotation,
+            pixels_per_voxel)
         rectify = self._rectifies(static, still, pixels_per_voxel)
         if self._info is None or tuple(self._info.shape[:3]) != (n_slabs, h, w):
             self._info = cuda.device_array((n_slabs, h, w, _INFO), dtype=np.float32)

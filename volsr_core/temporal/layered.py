@@ -248,7 +248,8 @@ class LayeredUpsampler(TemporalUpsampler):
         has = self.history is not None and self.history.shape == shape
         history = self.history if has else np.zeros((1, 1, 1, 5), dtype=np.float32)
         motion = slabs.reshape(n_slabs * h, w, SLAB_CHANNELS)[..., SLAB_MOTION:SLAB_MOTION + 2]
-        static, still, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
+        static, still, sigma, cap, tent = self._frame_settings(lambda: _moves(motion, 1e-3), has, rotation,
+                                                               pixels_per_voxel)
         rectify = self._rectifies(static, still, pixels_per_voxel)
         cols, runs = self._columns(w, jx, sigma)
         if self._info is None or self._info.shape[:3] != (n_slabs, h, w):

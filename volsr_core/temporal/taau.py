@@ -45,7 +45,9 @@ Without depth (``depth=None``) the disocclusion test is off. Feed jitter from
 """
 from __future__ import annotations
 
+import functools
 import math
+from typing import Callable
 
 import numba
 import numpy as np
@@ -305,7 +307,8 @@ class TemporalUpsampler:
             raise ValueError("need 0 < smooth_between[0] < smooth_between[1], smooth_tent in [0, 1] and "
                              "smooth_count in (0, 1]")
         self.scale = int(scale)
-        self.sigma, self.still_sigma_hr, self.static_sigma_hr = float(sigma), float(still_sigma_hr), float(static_sigma_hr)
+        self.sigma = float(sigma)
+        self.still_sigma_hr, self.static_sigma_hr = float(still_sigma_hr), float(static_sigma_hr)
         self.max_count, self.cap_angle, self.still_count = float(max_count), float(cap_angle), float(still_count)
         self.disocclusion, self.dis_motion = float(disocclusion), float(dis_motion)
         self.assumed_rotation = float(assumed_rotation)
@@ -330,22 +333,24 @@ class TemporalUpsampler:
         lo, hi = self.smooth_between
         return min(max((pixels_per_voxel * self.scale - lo) / (hi - lo), 0.0), 1.0)
 
-    def _rotation(self, moves: bool, rotation: float | None) -> float:
+    def _rotation(self, moves: Callable[[], bool], rotation: float | None) -> float:
         """This frame's view rotation in degrees (>= 0): ``rotation``, or where it is unknown (None) 0 when nothing
-        moves and else ``assumed_rotation`` (a brisk one)."""
+        moves (``moves()`` False) and else ``assumed_rotation`` (a brisk one)."""
         if rotation is None:
-            return self.assumed_rotation if moves else 0.0
+            return self.assumed_rotation if moves() else 0.0
         return max(float(rotation), 0.0)
 
-    def _frame_settings(self, moves: bool, has_history: bool, rotation: float | None,
+    def _frame_settings(self, moves: Callable[[], bool], has_history: bool, rotation: float | None,
                         pixels_per_voxel: float | None) -> tuple[bool, bool, float, float, float]:
         """This frame's (static, still, sigma in LR px, history cap, tent share), from whether any motion vector
-        moves, whether there is a history, the view's rotation (degrees, None: unknown) and the pixels per voxel;
-        still: the view does not rotate (a still camera, a pan, a zoom), static: nothing moves at all."""
-        static = not moves  # nothing moves at all (or no previous frame)
+        moves (``moves()``, asked only where the answer counts: a view of unknown rotation, or a still one with a
+        history; on the GPU the answer waits for the device), whether there is a history, the view's rotation
+        (degrees, None: unknown) and the pixels per voxel; still: the view does not rotate (a still camera, a pan,
+        a zoom), static: nothing moves at all."""
+        moves = functools.cache(moves)  # asked at most once
         rotation = self._rotation(moves, rotation)
         still = rotation < STILL_BELOW  # no view rotation: a still camera, a pan, a zoom
-        static = static and still and has_history
+        static = still and has_history and not moves()
         sigma = (self.static_sigma_hr if static else self.still_sigma_hr) / self.scale if still else self.sigma
         cap = self.still_count if still else self.max_count / (1.0 + rotation / self.cap_angle)
         smooth = 0.0 if still else self.smoothing(pixels_per_voxel)
@@ -404,7 +409,8 @@ class TemporalUpsampler:
         shape = (h * s, w * s, 5)
         has = self.history is not None and self.history.shape == shape
         history = self.history if has else np.zeros((1, 1, 5), dtype=np.float32)
-        static, _, sigma, cap, tent = self._frame_settings(_moves(motion, 1e-3), has, rotation, pixels_per_voxel)
+        static, _, sigma, cap, tent = self._frame_settings(lambda: _moves(motion, 1e-3), has, rotation,
+                                                           pixels_per_voxel)
         inv2s2 = 1.0 / (2.0 * sigma * sigma)
         cols, runs = self._columns(w, jx, sigma)
         if self._box is None or self._box.shape[:2] != (h, w):
