@@ -187,7 +187,8 @@ def test_a_pipelines_first_frame_and_the_next_run_taau_with_one_compiled_signatu
     TAAU's kernels compile once for both (a contiguous array compiled them a second time, 7 s at first use)."""
     result = subprocess.run([sys.executable, "-c", ONE_SIGNATURE], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.split() == ["1", "1", "1"]
+    prepass, kernel, moves = (int(n) for n in result.stdout.split())
+    assert (prepass, kernel) == (1, 1) and moves <= 1  # the motion test runs only where its answer counts
 
 
 FIRST_FRAMES = """

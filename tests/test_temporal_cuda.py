@@ -122,6 +122,20 @@ PIPELINE = textwrap.dedent("""
         asked[0] += counting[0]
         return ask(self, *args)
     MotionFlag.__call__ = counted_ask
+    # and when the host waits for the camera-cut check's sample: after the frame's filter is queued, not before
+    import volsr_core.runtime.base_filter_cuda as bfc
+    events, gather, queue_filter = [], bfc.every_nth, bfc.CudaBaseFilter.filter
+    class Pending:
+        def __init__(self, sample):
+            self.sample = sample
+        def copy_to_host(self):
+            events.append("sample read")
+            return self.sample.copy_to_host()
+    bfc.every_nth = lambda *args: Pending(gather(*args))
+    def logged_filter(self, *args, **kwargs):
+        events.append("filter queued")
+        return queue_filter(self, *args, **kwargs)
+    bfc.CudaBaseFilter.filter = logged_filter
 
     def counted_upscale(upscale):
         def call(*args, **kwargs):
@@ -144,7 +158,9 @@ PIPELINE = textwrap.dedent("""
         assert gpu.slabs == cpu.slabs == (scale // stretch // 2 - 1) * 2
         gpu.upscaler.upscale = counted_upscale(gpu.upscaler.upscale)
         for k, camera in enumerate(cameras):
+            events.clear()
             a, b = cpu.render(camera), gpu.render(camera)
+            assert events == (["filter queued", "sample read"] if k else ["filter queued"]), events
             assert isinstance(b, np.ndarray) and b.shape == a.shape == (size[1], size[0], 3)
             err = float(np.abs(a - b).max())
             print(f"XS {scale // stretch}x in {gpu.slabs} slabs, stretched {stretch}x, frame {k}: "
@@ -155,6 +171,18 @@ PIPELINE = textwrap.dedent("""
         assert asked[0] == 0, "a rotating view needs no motion flag"
         a, b = cpu.render(cameras[-1]), gpu.render(cameras[-1])  # the view held still: the flag says what moves
         assert asked[0] == 1 and float(np.abs(a - b).max()) < 1e-4
+        # a pan by half the view's height: no camera jump, but motion no history follows; the device made the frame
+        # with its history, read the sample, and makes it again without, as the CPU made it at once
+        import dataclasses, math
+        held = cameras[-1]
+        shift = held.basis()[0] * held.distance * math.tan(math.radians(held.view_angle) / 2.0)
+        pan = dataclasses.replace(held, position=held.position + shift, focal_point=held.focal_point + shift)
+        events.clear()
+        a, b = cpu.render(pan), gpu.render(pan)
+        assert cpu.upscaler.last_reset_reason == gpu.upscaler.last_reset_reason != ""
+        assert cpu.upscaler.resets == gpu.upscaler.resets
+        assert events == ["filter queued", "sample read", "filter queued"], events
+        assert float(np.abs(a - b).max()) < 1e-4
         assert gpu.last_timings["readback_ms"] > 0.0 == cpu.last_timings["readback_ms"]  # timed apart, on the GPU
         lr = gpu.last_low_resolution
         assert not lr.on_device and np.abs(lr.data - cpu.last_low_resolution.data).max() < 1e-4

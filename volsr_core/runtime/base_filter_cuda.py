@@ -130,16 +130,17 @@ class DeviceScratch:
         return buffer
 
 
-def every_nth(array, step: int, scratch: DeviceScratch | None = None) -> np.ndarray:
+def every_nth(array, step: int, scratch: DeviceScratch | None = None):
     """``array[::step, ::step]`` of an (h, w, C) float32 device array (a strided view of a frame's buffer, say),
-    gathered on the device and copied to the host: what a statistic over a sample of the frame needs, without the
-    frame's other channels and pixels travelling (a strided view's copy would bring its whole span). ``scratch``
-    keeps the sample's device buffer between calls."""
+    gathered on the device into a device array: what a statistic over a sample of the frame needs, its
+    ``copy_to_host()`` without the frame's other channels and pixels travelling (a strided view's copy would bring
+    its whole span). The gather is queued, not waited for: the copy waits for it (and for what was queued before it).
+    ``scratch`` keeps the sample's device buffer between calls."""
     rows, cols = (array.shape[0] + step - 1) // step, (array.shape[1] + step - 1) // step
     shape = (rows, cols, array.shape[2])
     sample = cuda.device_array(shape, dtype=np.float32) if scratch is None else scratch.get("every_nth", shape)
     _gather_every_nth[_blocks(cols, rows), THREADS](array, step, sample)
-    return sample.copy_to_host()
+    return sample
 
 
 class CudaBaseFilter:

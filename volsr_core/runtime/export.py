@@ -47,7 +47,8 @@ def example_inputs(config: NetworkConfig, height: int, width: int, batch: int = 
               torch.randn(batch, frames, 2, height, width, generator=g),
               torch.rand(batch, frames, 2, generator=g) - 0.5)
     if config.takes_history:
-        inputs += (torch.rand(batch, config.history_channels, height * config.scale, width * config.scale, generator=g),)
+        inputs += (torch.rand(batch, config.history_channels, height * config.scale, width * config.scale,
+                              generator=g),)
     return inputs
 
 

@@ -65,6 +65,6 @@ def model_file(variant: str = "XS", scale: int = DEFAULT_SCALE, kind: str = "onn
         raise InputError(path, "shipped model file is missing (reinstall volsr)")
     actual = file_sha256(path)
     if actual != entry["sha256"][kind]:
-        raise InputError(path, f"SHA-256 {actual[:16]}... does not match the registry's {entry['sha256'][kind][:16]}... "
-                         "(damaged or replaced)")
+        raise InputError(path, f"SHA-256 {actual[:16]}... does not match the registry's "
+                         f"{entry['sha256'][kind][:16]}... (damaged or replaced)")
     return path

@@ -164,17 +164,21 @@ class StatefulUpscaler:
         self.resets += 1
         self.last_reset_reason = reason
 
-    def _implausible(self, motion: np.ndarray) -> str:
-        """Both statistics over every ``step``-th pixel each way (about 64 x 64 of them): frame-wide fractions
-        that need no more, at a sixteenth of the cost on a 256² frame."""
-        h, w = motion.shape[:2]
-        step = max(1, min(h, w) // 64)
-        if hasattr(motion, "copy_to_host"):  # on the GPU: only the sample travels
+    def _motion_sample(self, motion) -> tuple[Any, int]:
+        """(every ``step``-th vector each way, step): about 64 x 64 of them, frame-wide fractions that need no more,
+        at a sixteenth of the cost on a 256² frame. On the GPU the sample is gathered there into a device array, its
+        copy to the host left to the caller."""
+        step = max(1, min(motion.shape[0], motion.shape[1]) // 64)
+        if hasattr(motion, "copy_to_host"):
             from volsr_core.runtime.base_filter_cuda import every_nth
 
-            sample = every_nth(motion, step, self._device_scratch)
-        else:
-            sample = motion[::step, ::step]
+            return every_nth(motion, step, self._device_scratch), step
+        return motion[::step, ::step], step
+
+    def _implausible(self, sample: np.ndarray, step: int, shape: tuple[int, ...]) -> str:
+        """Why the motion of a frame of ``shape`` (h, w, 2) cannot be followed, by its :meth:`_motion_sample` ("" when
+        it can): a median vector over a quarter of the frame's diagonal, or most vectors off the frame."""
+        h, w = shape[:2]
         squared_median, offscreen = _motion_statistics(sample, step, h, w)
         if squared_median > (self.max_motion * np.hypot(h, w)) ** 2:
             return "large motion"
@@ -182,12 +186,21 @@ class StatefulUpscaler:
             return "motion leaves the screen"
         return ""
 
-    def _cut(self, frame: FeatureFrame, inputs: np.ndarray) -> str:
-        """Why the history must go before ``frame`` ("" to keep it)."""
+    def _camera_cut(self, frame: FeatureFrame, inputs) -> str:
+        """What of :meth:`_cut` the host knows without the motion: a new size, a camera jump."""
         if self.frames[0][0].shape != inputs.shape:
             return "size changed"
-        return (camera_jump(frame.previous_camera, frame.camera, self.max_turn, self.max_zoom)
-                or self._implausible(frame.motion))
+        return camera_jump(frame.previous_camera, frame.camera, self.max_turn, self.max_zoom)
+
+    def _cut(self, frame: FeatureFrame, inputs) -> str:
+        """Why the history must go before ``frame`` ("" to keep it)."""
+        reason = self._camera_cut(frame, inputs)
+        if reason:
+            return reason
+        sample, step = self._motion_sample(frame.motion)
+        if hasattr(sample, "copy_to_host"):  # gathered on the GPU
+            sample = sample.copy_to_host()
+        return self._implausible(sample, step, frame.motion.shape)
 
     def _continues(self, frame: FeatureFrame, inputs: np.ndarray) -> bool:
         """Whether ``frame`` continues the frames held: drops them first when it is a cut (:meth:`_cut`)."""
@@ -229,9 +242,31 @@ class StatefulUpscaler:
 
     def _filtered(self, frame: FeatureFrame, background: Sequence[float]) -> np.ndarray:
         """:meth:`upscale` for a network that is only its base filter, run by the engine's CPU kernel
-        (:func:`~volsr_core.runtime.base_filter.filter_image`) on TAAU's (H, W, 3) estimate as it comes."""
+        (:func:`~volsr_core.runtime.base_filter.filter_image`) on TAAU's (H, W, 3) estimate as it comes, or on the
+        GPU by its kernels there.
+
+        On the GPU a frame that continues the held ones by the camera has its motion sample gathered, its TAAU and
+        filter queued, and only then the sample read: the host waits for the device once, as the frame ends, not
+        between the render and the kernels after it. Where the sample says the motion cannot be followed (rare: the
+        camera check passed) the frame is made again without its history, as it would have been."""
         colour = frame.color  # a view into the renderer's buffer, read in place by TAAU
+        if self.on_device and self.frames:
+            reason = self._camera_cut(frame, colour)
+            if reason:
+                self.reset(reason)
+            else:
+                sample, step = self._motion_sample(frame.motion)
+                image = self._filtered_frame(frame, frame.motion, background)
+                reason = self._implausible(sample.copy_to_host(), step, frame.motion.shape)
+                if not reason:
+                    return image
+                self.reset(reason)
         motion = frame.motion if self._continues(frame, colour) else _no_motion(frame.motion.shape)
+        return self._filtered_frame(frame, motion, background)
+
+    def _filtered_frame(self, frame: FeatureFrame, motion, background: Sequence[float]):
+        """:meth:`_filtered` for ``frame`` with ``motion`` (its own, or zeros after a cut)."""
+        colour = frame.color
         self.frames.appendleft((colour, motion, np.asarray(frame.jitter, dtype=np.float32)))
         rotation = view_rotation(frame.camera, frame.previous_camera)
         # the layered TAAU is told the pixels per voxel whatever the model's TAAU is told: XS 4x's filter on the told
