@@ -28,7 +28,7 @@ def _row_kernels(sources: str):
 
     @numba.njit(parallel=True, fastmath=True, cache=True)
     def render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
-        sources  # keys numba's disk cache on the stage modules (hashing.sources_sha256)
+        sources  # noqa: B018 - it keys numba's disk cache on the stage modules (hashing.sources_sha256)
         for r in numba.prange(out.shape[0]):
             y = _balanced_row(r, out.shape[0])
             for x in range(out.shape[1]):
@@ -36,7 +36,7 @@ def _row_kernels(sources: str):
 
     @numba.njit(parallel=True, fastmath=True, cache=True)
     def render_color_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
-        sources  # keys numba's disk cache on the stage modules (hashing.sources_sha256)
+        sources  # noqa: B018 - it keys numba's disk cache on the stage modules (hashing.sources_sha256)
         for r in numba.prange(out.shape[0]):
             y = _balanced_row(r, out.shape[0])
             for x in range(out.shape[1]):

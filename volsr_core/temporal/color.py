@@ -95,7 +95,7 @@ def _ycocg_rows(sources: str):
 
     @numba.njit(parallel=True, cache=True)
     def kernel(rgb: np.ndarray, ycocg: np.ndarray) -> None:
-        sources  # keys numba's disk cache on the stage module (hashing.sources_sha256)
+        sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
         for y in numba.prange(rgb.shape[0]):
             _ycocg_row(y, rgb, ycocg)
 

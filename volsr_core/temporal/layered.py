@@ -155,7 +155,7 @@ def _prepass_kernel(sources: str):
         ``info`` (K, h, w, _INFO); the min/max only with ``box`` (a frame that rectifies: 0.47 against 0.27 ms for
         two 128² slabs); separably (:func:`_widen`): three pixels of each row first (into the work buffer ``across``,
         of ``info``'s shape), then three rows of those, then each pixel's own motion where it shows."""
-        sources  # keys numba's disk cache on the layout module (hashing.sources_sha256)
+        sources  # noqa: B018 - it keys numba's disk cache on the layout module (hashing.sources_sha256)
         _widen(slabs, SLAB_RGBA, SLAB_RGBA, SLAB_RGBA + 3, SLAB_MOTION, False, box, across)
         _widen(across, 0, 4, 10, 8, True, box, info)
         n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
@@ -177,7 +177,7 @@ def _row_kernel(sources: str):
     @numba.njit(parallel=True, **_NB)
     def kernel(history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background, out,
                 new_history, shown):
-        sources  # keys numba's disk cache on the stage module (hashing.sources_sha256)
+        sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
         for y in numba.prange(out.shape[0]):
             acc = np.empty((out.shape[1], 4), dtype=np.float32)
             _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,

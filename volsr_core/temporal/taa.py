@@ -43,7 +43,7 @@ def _taa_rows(sources: str):
 
     @numba.njit(parallel=True, cache=True)
     def kernel(history, current, ycocg, motion, weight, variance, gamma, catmull_rom, towards_centre, out):
-        sources  # keys numba's disk cache on the colour and stage modules (hashing.sources_sha256)
+        sources  # noqa: B018 - it keys numba's disk cache on the colour and stage modules (hashing.sources_sha256)
         for y in numba.prange(current.shape[0]):
             _taa_row(y, history, current, ycocg, motion, weight, variance, gamma, catmull_rom, towards_centre, out)
 

@@ -215,14 +215,14 @@ def _kernels(sources: str):
 
     @numba.njit(parallel=True, cache=True)
     def prepass(lr, motion, scale, dis_motion, box):
-        sources  # keys numba's disk cache on the stage module (hashing.sources_sha256)
+        sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
         for j in numba.prange(lr.shape[0]):
             _prepass_row(j, lr, motion, scale, dis_motion, box)
 
     @numba.njit(parallel=True, cache=True)
     def kernel(history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
                rectify, out, new_history, keep_aux, aux):
-        sources  # keys numba's disk cache on the stage module (hashing.sources_sha256)
+        sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
         for y in numba.prange(out.shape[0]):
             _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap,
                  disocclusion, rectify, out, new_history, keep_aux, aux)
