@@ -227,3 +227,23 @@ def test_volsr_warmup_leaves_nothing_for_a_hosts_first_frames_to_compile(tmp_pat
     first = subprocess.run([sys.executable, "-c", FIRST_FRAMES], capture_output=True, text=True, env=env, timeout=900)
     assert first.returncode == 0, first.stderr
     assert json.loads(first.stdout) == [], "compiled at a first frame after the warm-up"
+
+
+ONE_RESAMPLING = """
+import numpy as np
+from volsr_core.temporal import resample
+
+image = np.random.default_rng(0).random((12, 10, 3), dtype=np.float32)
+for width, height in ((20, 24), (30, 36), (25, 17)):  # doubled (a sliding window) and not
+    resample.resize_bilinear(image, width, height)
+    resample.resize_bicubic(image, width, height, a=-0.75, clamp=(0.0, 1.0))
+print(len(resample._resample_kernel.signatures))
+"""
+
+
+def test_resizing_by_two_and_by_other_ratios_compiles_the_resampling_kernel_once():
+    """The doubling weights (empty where the ratio is not 2) are read-only as the taps are: a writable empty array
+    was another type to numba, and compiled the kernel a second time (the bench's 1/3 size stretch, say)."""
+    result = subprocess.run([sys.executable, "-c", ONE_RESAMPLING], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["1"]

@@ -63,12 +63,17 @@ def _across_row(line, cols, col_w, out):
 @functools.lru_cache(maxsize=64)
 def _doubling_weights(n_in: int, n_out: int, cubic: bool, a: float) -> np.ndarray:
     """At n_out = 2 n_in, the weights of the even and the odd outputs, (2, taps) float32: :func:`_axis_taps`' rows
-    repeat with period 2 (the same weights, the inputs one further each period); else an empty (0, taps)."""
+    repeat with period 2 (the same weights, the inputs one further each period); else an empty (0, taps). Read-only
+    either way, as :func:`_axis_taps`' are: numba types a read-only array apart from a writable one, and a writable
+    empty one compiled the resampling kernel a second time for the sizes that do not double."""
     taps = 4 if cubic else 2
     if n_out != 2 * n_in:
-        return np.zeros((0, taps), np.float32)
-    weights = _axis_taps(n_in, n_out, cubic, a)[1]
-    return np.ascontiguousarray(weights[2:4] if n_in > 1 else weights[:2])
+        weights = np.zeros((0, taps), np.float32)
+    else:
+        weights = _axis_taps(n_in, n_out, cubic, a)[1]
+        weights = np.ascontiguousarray(weights[2:4] if n_in > 1 else weights[:2])
+    weights.flags.writeable = False
+    return weights
 
 
 @numba.njit(fastmath=True, boundscheck=False, cache=True)
