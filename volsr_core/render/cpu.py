@@ -21,10 +21,11 @@ def _balanced_row(r, height):
     return r // 2 if r % 2 == 0 else half + r // 2
 
 
-def _row_kernels(sources: str):
-    """The kernels of the two ray programs, over image rows; closures over ``sources``, the digest of the modules
-    whose stages and constants they compile in (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk
-    cache compiles them anew when those change."""
+def _row_kernel(sources: str, features: bool):
+    """The kernel of one ray program (every feature, or the colour alone) over image rows; a closure over
+    ``sources``, the digest of the modules whose stages and constants it compiles in
+    (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles it anew when those change, and
+    over ``features``, a constant to numba: each kernel holds one program."""
 
     @numba.njit(parallel=True, fastmath=True, cache=True)
     def render_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
@@ -32,20 +33,16 @@ def _row_kernels(sources: str):
         for r in numba.prange(out.shape[0]):
             y = _balanced_row(r, out.shape[0])
             for x in range(out.shape[1]):
-                march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+                if features:
+                    march_ray(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
+                else:
+                    march_color(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
 
-    @numba.njit(parallel=True, fastmath=True, cache=True)
-    def render_color_rows(vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs):
-        sources  # noqa: B018 - it keys numba's disk cache on the stage modules (hashing.sources_sha256)
-        for r in numba.prange(out.shape[0]):
-            y = _balanced_row(r, out.shape[0])
-            for x in range(out.shape[1]):
-                march_color(x, y, vol, empty, lut, glut, cam, w2i, grad_w, params, prev_vp, out, slabs)
-
-    return render_rows, render_color_rows
+    return render_rows
 
 
-_render_rows, _render_color_rows = _row_kernels(sources_sha256(stages, layout))
+_SOURCES = sources_sha256(stages, layout)
+_render_rows, _render_color_rows = _row_kernel(_SOURCES, True), _row_kernel(_SOURCES, False)
 
 
 def render_cpu(vol: np.ndarray, empty: np.ndarray, lut: np.ndarray, glut: np.ndarray, cam: np.ndarray,
