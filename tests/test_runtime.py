@@ -130,16 +130,19 @@ def test_upscaler_uses_history_and_resets_on_demand_on_size_change_and_on_jumps(
 
 
 @pytest.mark.parametrize("shape, step, spread", [((64, 64), 1, 3.0), ((130, 97), 2, 40.0), ((256, 200), 3, 0.0)])
-def test_motion_statistics_are_numpys_median_and_offscreen_fraction(shape, step, spread):
+def test_motion_statistics_count_long_and_offscreen_vectors_as_numpy_does(shape, step, spread):
     h, w = shape
     motion = np.random.default_rng(h).normal(0.0, spread, (h, w, 2)).astype(np.float32)
     sample = motion[::step, ::step]
-    squared = np.square(sample[..., 0]) + np.square(sample[..., 1])
+    length = np.sqrt(np.square(sample[..., 0]) + np.square(sample[..., 1]))
     x = np.arange(0, w, step)[None, :] + 0.5 + sample[..., 0]
     y = np.arange(0, h, step)[:, None] + 0.5 + sample[..., 1]
-    median, offscreen = _motion_statistics(sample, step, h, w)
-    assert median == pytest.approx(float(np.median(squared)), rel=1e-6)
-    assert offscreen == pytest.approx(float(np.mean((x < 0) | (x > w) | (y < 0) | (y > h))), abs=1e-12)
+    for limit in (0.5 * spread, float(np.median(length)) * 0.999, float(np.median(length)) * 1.001, 2.0 * spread):
+        longer, offscreen = _motion_statistics(sample, step, h, w, limit)
+        assert longer == pytest.approx(float(np.mean(length > limit)), abs=1e-3)  # lengths within rounding of it
+        lower_median = np.sort(length, axis=None)[length.size - length.size // 2 - 1]
+        assert (longer > 0.5) == (lower_median > limit)  # over a half: the median (the lower middle one) is longer
+        assert offscreen == pytest.approx(float(np.mean((x < 0) | (x > w) | (y < 0) | (y > h))), abs=1e-12)
 
 
 def test_pipeline_renders_jittered_lr_frames_and_upscales_them_at_any_size(exported):

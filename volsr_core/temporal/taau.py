@@ -233,20 +233,32 @@ def _kernels(sources: str):
 _prepass, _kernel = _kernels(sources_sha256(stages))
 
 
+@numba.njit(cache=True)
 def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> tuple[np.ndarray, np.ndarray]:
     """Per HR column: nearest LR sample, the 2x2 window's two columns, their Gaussian weights and the
     fractional position between them (the bilinear weight of the second); and the runs of HR columns
-    whose nearest LR sample is the same: column lx's run is ``runs[lx]`` .. ``runs[lx + 1] - 1``."""
-    u = (np.arange(hr_w) + 0.5) / scale - 0.5 - jx
+    whose nearest LR sample is the same: column lx's run is ``runs[lx]`` .. ``runs[lx + 1] - 1``. One numba
+    loop, for each frame of new jitter (at 4x a bench frame: 13 µs a call for 1024 columns, 26 in numpy)."""
     cols = np.empty((hr_w, 6), dtype=np.float64)
-    cols[:, 0] = np.clip(np.floor(u + 0.5), 0, lr_w - 1)
-    f = np.floor(u)
-    cols[:, 1] = np.clip(f, 0, lr_w - 1)
-    cols[:, 2] = np.clip(f + 1, 0, lr_w - 1)
-    cols[:, 3] = np.exp(-(u - f) ** 2 * inv2s2)
-    cols[:, 4] = np.exp(-(u - f - 1) ** 2 * inv2s2)
-    cols[:, 5] = u - f
-    runs = np.searchsorted(cols[:, 0], np.arange(lr_w + 1)).astype(np.int64)
+    runs = np.empty(lr_w + 1, dtype=np.int64)
+    last = float(lr_w - 1)
+    lx = 0
+    for x in range(hr_w):
+        u = (x + 0.5) / scale - 0.5 - jx
+        f = math.floor(u)
+        nearest = min(max(math.floor(u + 0.5), 0.0), last)
+        cols[x, 0] = nearest
+        cols[x, 1] = min(max(f, 0.0), last)
+        cols[x, 2] = min(max(f + 1.0, 0.0), last)
+        cols[x, 3] = math.exp(-(u - f) ** 2 * inv2s2)
+        cols[x, 4] = math.exp(-(u - f - 1.0) ** 2 * inv2s2)
+        cols[x, 5] = u - f
+        while lx <= lr_w and lx <= nearest:  # the first column whose nearest sample is lx or more
+            runs[lx] = x
+            lx += 1
+    while lx <= lr_w:
+        runs[lx] = hr_w
+        lx += 1
     runs[lr_w] = hr_w
     return cols, runs
 
