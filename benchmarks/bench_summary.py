@@ -4,8 +4,10 @@
 
 Per VolSR method (a row) and run (a column, in the order given): its distance to the curve at equal time over the
 run's volumes, lowest to highest in dB, and on how many volumes it clears issue 12's margin (target 2,
-:func:`~volsr_core.apps.bench.report.check_targets`, read again from each run's rows). What docs/performance.md
-opens with; the runs' own bench.md give each volume.
+:func:`~volsr_core.apps.bench.report.check_targets`, read again from each run's rows); for runs timed in several
+passes over the orbit, also on how many it clears the margin in every pass and in at least one (each pass's times
+against that pass's curve): the verdicts the machine's pace within the run could not move, and those it could.
+What docs/performance.md opens with; the runs' own bench.md give each volume.
 """
 from __future__ import annotations
 
@@ -16,12 +18,13 @@ from pathlib import Path
 from volsr_core.apps.bench.report import TARGET_MARGIN_DB, check_targets
 
 
-def margins(rows: list[dict]) -> dict[str, list[float]]:
-    """VolSR label -> its margins (dB) over the run's volumes, in the rows' order."""
-    found: dict[str, list[float]] = {}
+def margins(rows: list[dict]) -> dict[str, list[dict]]:
+    """VolSR label -> its points of :func:`~volsr_core.apps.bench.report.check_targets` (``margin_db``, and
+    ``margin_db_passes`` where the run has them) over the run's volumes, in the rows' order."""
+    found: dict[str, list[dict]] = {}
     for scene in check_targets(rows).values():
         for point in scene["above_bilinear"]["points"]:
-            found.setdefault(point["label"], []).append(point["margin_db"])
+            found.setdefault(point["label"], []).append(point)
     return found
 
 
@@ -31,12 +34,18 @@ def render_factors(rows: list[dict]) -> dict[str, int]:
     return {r["label"]: int(r["scale"]) for r in rows if r["method"] == "volsr"}
 
 
-def cell(values: list[float] | None) -> str:
-    if not values:
+def cell(points: list[dict] | None) -> str:
+    if not points:
         return "–"
+    values = [p["margin_db"] for p in points]
     cleared = sum(v >= TARGET_MARGIN_DB for v in values)
     span = f"{min(values):+.2f}" if len(values) == 1 else f"{min(values):+.2f} to {max(values):+.2f}"
-    return f"{span} ({cleared}/{len(values)})"
+    passes = [p.get("margin_db_passes") for p in points]
+    if not all(passes):
+        return f"{span} ({cleared}/{len(values)})"
+    every = sum(min(m) >= TARGET_MARGIN_DB for m in passes)
+    some = sum(max(m) >= TARGET_MARGIN_DB for m in passes)
+    return f"{span} ({cleared}/{len(values)}; every pass {every}, some pass {some})"
 
 
 def main() -> None:

@@ -204,6 +204,29 @@ def test_targets_at_their_boundaries_and_per_scene():
     assert [p["met"] for p in both["w"]["fast_4x"]["points"]] == [False, False]
 
 
+def test_each_timing_pass_gives_a_margin_against_its_own_curve():
+    """With the times of several passes over the orbit, a VolSR point's margin in each pass is its time in that pass
+    against the curve through the baseline's times in that pass (the same PSNRs): here the point clears the margin
+    on the medians and in pass 2, where the curve's 1/4-size point ran slow, but not in pass 3, where it did."""
+    def timed(r, passes):
+        return {**r, "ms_total_passes": passes}
+
+    base = [timed(row("native", "native 1 spp", 90.0, 30.0), [90.0, 90.0, 90.0]),
+            timed(row("bilinear", "1/2", 30.0, 26.0, 2), [30.0, 30.0, 30.0]),
+            timed(row("bilinear", "1/4", 10.0, 22.0, 4), [10.0, 12.0, 10.0])]
+    point = timed(row("volsr", "VolSR XS 2x", 20.0, 24.6, 2), [20.0, 20.0, 25.0])
+    p = check_targets(base + [point])["v"]["above_bilinear"]["points"][0]
+    assert p["met"] and p["margin_db"] == pytest.approx(0.6)
+    # pass 2: the curve at 20 ms runs from (12, 22) to (30, 26): 22 + 8 * 4 / 18; pass 3: the point at 25 ms, 25 dB
+    assert p["margin_db_passes"] == pytest.approx([0.6, 24.6 - (22.0 + 8.0 * 4.0 / 18.0), -0.4], abs=1e-4)
+    assert "(+0.60 dB; each pass +0.60 / +0.82 / -0.40): yes" in target_lines(check_targets(base + [point])["v"])[-1]
+    one_pass = {**point, "ms_total_passes": [20.0]}  # a run of one pass, or rows of an older version: no margins
+    uneven = {**point, "ms_total_passes": [20.0, 20.0]}
+    for other in (one_pass, uneven, row("volsr", "VolSR XS 2x", 20.0, 24.6, 2)):
+        p = check_targets(base + [other])["v"]["above_bilinear"]["points"][0]
+        assert "margin_db_passes" not in p and "each pass" not in target_lines(check_targets(base + [other])["v"])[-1]
+
+
 def test_scene_specs(tmp_path):
     assert parse_scene_spec(None) == (None, None, None)
     assert parse_scene_spec("phantom") == (None, None, None)
@@ -279,6 +302,49 @@ def test_timing_passes_run_fresh_methods_over_the_same_orbit_and_leave_the_score
     with pytest.raises(ValueError, match="the scored pass.s methods, in its order"):
         bench_one(scene, caster, size, methods(), cameras, reference_spp=4, warmup=1,
                   timing_passes=[methods()[::-1]])
+
+
+def test_the_scored_pass_scores_each_frame_as_it_was_rendered_from_methods_that_reuse_their_buffer():
+    """The scored pass keeps its images in a store per method, made once (a copy a frame grew the heap between the
+    methods' frames and slowed every method's frames in that pass: docs/performance.md); each frame is scored as it
+    was rendered, also from a method that writes every frame into the same buffer, and the stores of two methods
+    stay apart."""
+    from volsr_core.apps.bench.run import bench_one
+    from volsr_core.apps.bench.scenes import load_bench_volume
+    from volsr_core.render.raycaster import RayCaster
+    from volsr_core.runtime.methods import Method, MethodFrame
+    from volsr_core.scene.camera_paths import orbit_around
+    from volsr_core.sr.metrics import psnr_ssim
+    from volsr_core.temporal.ground_truth import supersampled_truth
+
+    scene = load_bench_volume(None, None, "auto")
+    caster = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign")
+    size, warmup = (24, 16), 1
+    cameras = orbit_around(caster.visible_bounds(), 5, 2.0)
+
+    class Grey(Method):  # one grey a frame, written into the same buffer every frame
+        kind = "native"
+
+        def __init__(self, start: float):
+            super().__init__(size)
+            self.start, self.frame = start, 0
+            self.buffer = np.empty((size[1], size[0], 3), np.float32)
+
+        @property
+        def label(self) -> str:
+            return f"grey from {self.start}"
+
+        def __call__(self, camera) -> MethodFrame:
+            self.buffer[...] = self.start + 0.1 * self.frame
+            self.frame += 1
+            return MethodFrame(self.buffer, 1.0)
+
+    rows = bench_one(scene, caster, size, [Grey(0.1), Grey(0.3)], cameras, reference_spp=2, warmup=warmup)
+    truth = [supersampled_truth(caster, camera, t, *size, 2) for t, camera in enumerate(cameras)]
+    for row, start in zip(rows, (0.1, 0.3)):
+        expected = [psnr_ssim(np.full((size[1], size[0], 3), start + 0.1 * t, np.float32), truth[t],
+                              channel_axis=-1)[0] for t in range(warmup, len(cameras))]
+        assert row["psnr_frames"] == pytest.approx(expected, abs=1e-4)  # as the rows round them
 
 
 def test_bad_settings_give_one_line_errors(tmp_path):

@@ -83,7 +83,10 @@ def check_targets(rows: Sequence[dict]) -> dict[str, dict[str, Any]]:
        time, its PSNR interpolated linearly in time at the VolSR point's time (beyond the curve's
        time span: the end point's PSNR; such points are flagged ``outside``). A point short of the margin also
        says by what time it would have met it at its PSNR, ``ms_needed`` (:func:`curve_time_for`; None: at no
-       time, the curve's fastest point lies above it less the margin).
+       time, the curve's fastest point lies above it less the margin). Where the rows hold the times of several
+       passes over the orbit (``ms_total_passes``), each point also gives its margin in each pass, against the
+       curve of that pass's times (``margin_db_passes``): how far the machine's pace moves the verdict within
+       the run; the verdict itself is on the medians.
 
     ``met`` is True / False, or None when the rows cannot tell (no native 1 spp, no VolSR model).
     """
@@ -116,11 +119,26 @@ def check_targets(rows: Sequence[dict]) -> dict[str, dict[str, Any]]:
                 if not point["met"]:
                     needed = curve_time_for(times, psnrs, r["psnr"] - TARGET_MARGIN_DB)
                     point["ms_needed"] = None if needed is None else round(needed, 4)
+                passes = _margins_per_pass(curve, r)
+                if passes:
+                    point["margin_db_passes"] = passes
                 above["points"].append(point)
             if above["points"]:
                 above["met"] = all(p["met"] for p in above["points"])
         result[scene] = {"fast_4x": fast, "above_bilinear": above}
     return result
+
+
+def _margins_per_pass(curve: Sequence[dict], point: dict) -> list[float] | None:
+    """``point``'s distance (dB) to the curve through ``curve``'s rows in each timing pass: its time in pass p
+    against the curve of the rows' times in pass p (their PSNRs are the scored pass's in every pass); None unless
+    every row holds the same number (two or more) of pass times."""
+    passes = [r.get("ms_total_passes") or [] for r in [point, *curve]]
+    if len(passes[0]) < 2 or any(len(p) != len(passes[0]) for p in passes):
+        return None
+    psnrs = [r["psnr"] for r in curve]
+    return [round(point["psnr"] - curve_psnr_at([p[k] for p in passes[1:]], psnrs, passes[0][k]), 4)
+            for k in range(len(passes[0]))]
 
 
 def _verdict(met: bool | None) -> str:
@@ -147,9 +165,15 @@ def target_lines(targets: dict[str, Any]) -> list[str]:
         text += " - no VolSR model was benchmarked"
     lines.append(text)
     lines += [f"   - {p['label']}: {p['psnr']:.2f} dB vs curve {p['curve_psnr']:.2f} dB at {p['ms_total']:.1f} ms "
-              f"({p['margin_db']:+.2f} dB{', beyond the curve: its end point' if p['outside'] else ''}): "
-              f"{'yes' if p['met'] else 'no' + _needed(p)}" for p in above["points"]]
+              f"({p['margin_db']:+.2f} dB{', beyond the curve: its end point' if p['outside'] else ''}"
+              f"{_each_pass(p)}): {'yes' if p['met'] else 'no' + _needed(p)}" for p in above["points"]]
     return lines
+
+
+def _each_pass(point: dict[str, Any]) -> str:
+    """A point's margins in each timing pass, for the verdict lines ("" for rows of one pass)."""
+    margins = point.get("margin_db_passes")
+    return "" if not margins else "; each pass " + " / ".join(f"{m:+.2f}" for m in margins)
 
 
 def _needed(point: dict[str, Any]) -> str:
