@@ -16,8 +16,9 @@ all of them :mod:`volsr_core.runtime.methods`.
 Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per
 pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image; the scored pass's images are kept and scored
 after it, on every core, so no scoring runs between the methods' frames; they are kept in one store per method, made
-and paged in at its first scored frame: a copy made anew per frame grew the heap between the methods' frames and
-added about 17 ms to every method's frames at 1024², 4 at 512², in that pass alone). Quality is averaged over the
+and paged in at its first scored frame: a copy made anew per frame grew the process's memory between the methods'
+frames, and in that pass alone every method's frames took longer, by about 17 ms at 1024² on a run's first volume,
+docs/performance.md). Quality is averaged over the
 frames after ``warmup`` warm-up frames; times are medians over the same frames of ``timing_passes``
 passes over the orbit: the scored one and ``timing_passes - 1`` more with fresh methods (their histories
 empty again), timed and not scored (the warm-up also absorbs kernel compilation). A method's time on this
