@@ -132,9 +132,9 @@ def check_targets(rows: Sequence[dict]) -> dict[str, dict[str, Any]]:
 def _margins_per_pass(curve: Sequence[dict], point: dict) -> list[float] | None:
     """``point``'s distance (dB) to the curve through ``curve``'s rows in each timing pass: its time in pass p
     against the curve of the rows' times in pass p (their PSNRs are the scored pass's in every pass); None unless
-    every row holds the same number (two or more) of pass times."""
+    every row holds the same number (two or more) of finite pass times."""
     passes = [r.get("ms_total_passes") or [] for r in [point, *curve]]
-    if len(passes[0]) < 2 or any(len(p) != len(passes[0]) for p in passes):
+    if len(passes[0]) < 2 or any(len(p) != len(passes[0]) or None in p for p in passes):
         return None
     psnrs = [r["psnr"] for r in curve]
     return [round(point["psnr"] - curve_psnr_at([p[k] for p in passes[1:]], psnrs, passes[0][k]), 4)
