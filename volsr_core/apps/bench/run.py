@@ -15,10 +15,11 @@ all of them :mod:`volsr_core.runtime.methods`.
 
 Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per
 pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image; the scored pass's images are kept and scored
-after it, on every core, so no scoring runs between the methods' frames; they are kept in one store per method, made
-and paged in at its first scored frame: a copy made anew per frame grew the process's memory between the methods'
-frames, and in that pass alone every method's frames took longer, by about 17 ms at 1024² on a run's first volume;
-docs/performance.md, "The scored pass timed its own bookkeeping"). Quality is averaged over the frames after
+after it, on every core, so no scoring runs between the methods' frames; they are kept in one store per method, one
+block allocated at its first scored frame: a copy allocated anew per frame grew the memory the methods take their
+images from between their frames, and in that pass alone every method's frames took longer, by about 17 ms at 1024²
+on a run's first volume; docs/performance.md, "The scored pass timed its own bookkeeping"). Quality is averaged over
+the frames after
 ``warmup`` warm-up frames; times are medians over the same frames of ``timing_passes`` passes over the orbit: the
 scored one and ``timing_passes - 1`` more with fresh methods (their histories empty again), timed and not scored
 (the warm-up also absorbs kernel compilation). A method's time on this 2-core machine moves by 10-40% from frame to
@@ -242,7 +243,7 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
         timed(i, t, frame)
         image = frame.image[:height, :width]
         if i not in stores:
-            stores[i] = np.zeros((len(cameras) - warmup,) + image.shape, image.dtype)  # zeroed: paged in now
+            stores[i] = np.zeros((len(cameras) - warmup,) + image.shape, image.dtype)  # one block, its own pages
         store = stores[i][t - warmup]
         store[...] = image  # a copy: a method may reuse its buffer
         kept.append((i, store, truth[t]))
