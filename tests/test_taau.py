@@ -380,3 +380,24 @@ def test_a_finely_sampled_real_volume_is_upscaled_better_with_smoothing(shared_d
     for smoothed, unsmoothed, bilinear in scores:
         assert smoothed > unsmoothed + 1.0
         assert smoothed - unsmoothed > 0.4 * (bilinear - unsmoothed)
+
+
+@pytest.mark.parametrize("lr_w, scale", [(1, 4), (3, 3), (7, 2), (64, 4), (256, 8)])
+def test_the_column_taps_are_their_definition(lr_w, scale):
+    """Per HR column the nearest LR sample, the 2x2 window's columns, their Gaussian weights and the fraction past the
+    first (HR pixel X at LR position u = (X + 0.5) / scale - 0.5 - jx), and per LR sample the first HR column whose
+    nearest sample it is or a later one (numpy's searchsorted), edges clamped."""
+    from volsr_core.temporal.taau import _columns
+
+    for jx in (-0.5, -0.125, 0.0, 0.3, 0.49):
+        inv2s2 = 1.0 / (2.0 * 0.35 ** 2)
+        u = (np.arange(lr_w * scale) + 0.5) / scale - 0.5 - jx
+        f = np.floor(u)
+        nearest = np.clip(np.floor(u + 0.5), 0, lr_w - 1)
+        expected = np.stack([nearest, np.clip(f, 0, lr_w - 1), np.clip(f + 1, 0, lr_w - 1),
+                             np.exp(-(u - f) ** 2 * inv2s2), np.exp(-(u - f - 1) ** 2 * inv2s2), u - f], axis=1)
+        runs = np.searchsorted(nearest, np.arange(lr_w + 1))
+        runs[lr_w] = lr_w * scale
+        cols, got_runs = _columns(lr_w * scale, lr_w, scale, jx, inv2s2)
+        np.testing.assert_allclose(cols, expected, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(got_runs, runs)

@@ -196,14 +196,12 @@ class StatefulUpscaler:
         return camera_jump(frame.previous_camera, frame.camera, self.max_turn, self.max_zoom)
 
     def _cut(self, frame: FeatureFrame, inputs) -> str:
-        """Why the history must go before ``frame`` ("" to keep it)."""
+        """Why the history must go before ``frame`` ("" to keep it): a host frame's (a frame on the GPU is checked by
+        :meth:`_filtered`, which reads its sample after queuing its kernels)."""
         reason = self._camera_cut(frame, inputs)
         if reason:
             return reason
-        sample, step = self._motion_sample(frame.motion)
-        if hasattr(sample, "copy_to_host"):  # gathered on the GPU
-            sample = sample.copy_to_host()
-        return self._implausible(sample, step, frame.motion.shape)
+        return self._implausible(*self._motion_sample(frame.motion), frame.motion.shape)
 
     def _continues(self, frame: FeatureFrame, inputs: np.ndarray) -> bool:
         """Whether ``frame`` continues the frames held: drops them first when it is a cut (:meth:`_cut`)."""

@@ -253,13 +253,10 @@ def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> tupl
         cols[x, 3] = math.exp(-(u - f) ** 2 * inv2s2)
         cols[x, 4] = math.exp(-(u - f - 1.0) ** 2 * inv2s2)
         cols[x, 5] = u - f
-        while lx <= lr_w and lx <= nearest:  # the first column whose nearest sample is lx or more
+        while lx <= nearest:  # the first column whose nearest sample is lx or more
             runs[lx] = x
             lx += 1
-    while lx <= lr_w:
-        runs[lx] = hr_w
-        lx += 1
-    runs[lr_w] = hr_w
+    runs[lx:] = hr_w  # samples no column is nearest to (the last ones), and the end
     return cols, runs
 
 
