@@ -302,6 +302,35 @@ def test_the_history_is_the_catmull_rom_fetch_at_the_reprojected_position_clampe
     assert checked > hr * hr // 2 and flat > hr * hr // 8
 
 
+@pytest.mark.parametrize("scale", [2, 4])
+def test_a_pixel_whose_lr_box_is_one_colour_is_that_colour_whatever_its_history(scale):
+    """Where the 3x3 LR neighbourhood of a pixel's nearest sample is one colour (the background around a volume) the
+    clamped history and the splat are that colour, so the blend is: the kernel writes it without computing them (a
+    region of a colour and a black one, the frame rotating: the clamp on)."""
+    n = 10
+    rng = np.random.default_rng(5)
+    up = TemporalUpsampler(scale)
+    up(rng.random((n, n, 3), dtype=np.float32), np.zeros((n, n, 2), np.float32), (0.0, 0.0), rotation=0.0)
+    lr = rng.random((n, n, 3), dtype=np.float32)
+    lr[:, :4] = (0.2, 0.5, 0.7)
+    lr[6:, 6:] = 0.0
+    motion = rng.uniform(-1.5, 1.5, (n, n, 2)).astype(np.float32)
+    jitter = (-0.3, 0.2)
+    out = up(lr, motion, jitter, rng.random((n, n)).astype(np.float32), rotation=2.0)
+    ycocg = image_to_ycocg(lr)
+    hr = n * scale
+    flat = 0
+    for y in range(hr):
+        ly = min(max(int(np.floor((y + 0.5) / scale - 0.5 - jitter[1] + 0.5)), 0), n - 1)
+        for x in range(hr):
+            lx = min(max(int(np.floor((x + 0.5) / scale - 0.5 - jitter[0] + 0.5)), 0), n - 1)
+            lo, hi = box_minmax(ycocg, lx, ly)
+            if np.all(lo == hi):
+                np.testing.assert_allclose(out[y, x], lr[ly, lx], atol=1e-6)
+                flat += 1
+    assert flat > hr * hr // 4
+
+
 # -- fine sampling: the bilinear blend and the shorter history -------------------------------------
 def test_smoothing_ramps_with_the_output_pixels_per_voxel():
     up = TemporalUpsampler(2)  # smooth between 1.75 and 2.75 output px per voxel

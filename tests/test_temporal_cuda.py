@@ -40,6 +40,7 @@ SCRIPT = textwrap.dedent("""
         cpu, gpu = TemporalUpsampler(scale, side_outputs=False), CudaTemporalUpsampler(scale)
         for t, (rotation, ppv, moves) in enumerate(views):
             colour = rng.random((h, w, 3), dtype=np.float32)
+            colour[:, :3] = (0.2, 0.5, 0.7)  # one colour: boxes of one colour, whose pixels take it
             motion = (rng.random((h, w, 2), dtype=np.float32) - 0.5) * (1.2 if moves else 0.0)
             motion[:, w // 2:] *= -1.5 if moves else 1.0  # two layers moving apart: parallax, the depth test
             depth = rng.random((h, w), dtype=np.float32)

@@ -31,6 +31,7 @@ from volsr_core.temporal.taau import TemporalUpsampler, checked_jitter  # noqa: 
 
 _STAGES = build_temporal_stages(cuda.jit(device=True, inline=True))
 _to_ycocg32, _sample_window, _splat_weights = _STAGES.to_ycocg32, _STAGES.sample_window, _STAGES.splat_weights
+_to_rgb = _STAGES.to_rgb
 _catmull_rom_weights, _history_column = _STAGES.catmull_rom_weights, _STAGES.history_column
 _mix, _taps, _clamp_to_ycocg_bounds = _STAGES.catmull_rom_mix, _STAGES.bilinear_taps, _STAGES.clamp_to_ycocg_bounds
 _nearest_depth, _history_weight = _STAGES.nearest_depth, _STAGES.history_weight
@@ -127,11 +128,17 @@ def _taau_pixels(history, has_history, lr, motion, depth, box, scale, jx, jy, in
     lr_h, lr_w = lr.shape[0], lr.shape[1]
     ly, y0, y1, dy0, wy0, wy1 = _sample_window(y, scale, jy, lr_h, inv2s2)
     lx, x0, x1, fx, wx0, wx1 = _sample_window(x, scale, jx, lr_w, inv2s2)
+    # one colour in the 3x3 box (the background around a volume, mostly): the pixel is that colour (as on the CPU)
+    flat = (rectify and box[ly, lx, 0] == box[ly, lx, 3] and box[ly, lx, 1] == box[ly, lx, 4]
+            and box[ly, lx, 2] == box[ly, lx, 5])
     # 1. the current estimate: 2x2 Gaussian splat, blended with bilinear weights by ``tent``
     w00, w01, w10, w11, a, inv = _splat_weights(wy0, wy1, wx0, wx1, dy0, fx, tent)
-    e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
-    e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
-    e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
+    if flat:
+        e0, e1, e2 = _to_rgb(box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2])
+    else:
+        e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
+        e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
+        e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
     # 2. motion of the nearest LR sample
     d = depth[ly, lx]
     sy = y + scale * motion[ly, lx, 1]
@@ -150,7 +157,7 @@ def _taau_pixels(history, has_history, lr, motion, depth, box, scale, jx, jy, in
             dropped = d - _nearest_depth(history, iy, iy1, ix, ix1) > disocclusion
         if not dropped:  # 3. accumulated weight (bilinear) and Catmull-Rom colour
             n = _history_weight(history, iy, iy1, ix, ix1, tx, ty, cap)
-        if n > 0.0:
+        if n > 0.0 and not flat:
             ay = _catmull_rom_weights(ty)
             rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))
             h0, h1, h2 = _mix(_catmull_rom_weights(tx), _history_column(history, max(ix - 1, 0), rows, ay),
@@ -160,7 +167,9 @@ def _taau_pixels(history, has_history, lr, motion, depth, box, scale, jx, jy, in
                 h0, h1, h2 = _clamp_to_ycocg_bounds(h0, h1, h2, box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2],
                                                     box[ly, lx, 3], box[ly, lx, 4], box[ly, lx, 5])
     # 7. blend
-    if n > 0.0:
+    if flat:
+        o0, o1, o2 = e0, e1, e2
+    elif n > 0.0:
         share = 1.0 / (n + a)
         o0, o1, o2 = (n * h0 + a * e0) * share, (n * h1 + a * e1) * share, (n * h2 + a * e2) * share
     else:

@@ -25,8 +25,10 @@ orbit per frame (at 1024² and 5° by 0.00-0.27 dB), and converges on a still ca
    tripping the test at silhouettes.
 5. **Rectification**: per-channel clamp into the YCoCg min/max box of the 3x3 LR neighbourhood of
    the nearest sample. Where that box is one colour (the background around a volume: 65-85% of a bench
-   frame's pixels) the clamp gives that colour whatever the history says, so step 3's colour fetch is
-   skipped there (the same values; 0.78-0.83 of the kernel's time at 512² and 1024²).
+   frame's pixels) the clamp gives that colour whatever the history says, and so does step 1's splat, whose
+   2x2 samples lie among the nine: the pixel is that colour, without step 3's colour fetch, the splat or
+   the blend (the same values; the fetch skipped: 0.78-0.83 of the kernel's time at 512² and 1024²; the
+   splat and the blend too: 0.76-0.87 of that, docs/temporal.md, "Speed").
 6. **History length**: ``n`` is capped at ``max_count / (1 + rotation / cap_angle)`` with
    ``rotation`` the view's rotation since the last frame (degrees): shading (headlight) and the
    parallax of semi-transparent layers change the image with the view direction, so history ages
@@ -144,19 +146,25 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         lo0, lo1, lo2, hi0, hi1, hi2 = box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2], box[ly, lx, 3], box[ly, lx, 4], \
             box[ly, lx, 5]
         # one colour in all nine (the background around a volume, mostly): the clamp gives that colour whatever the
-        # history says, so the run skips the Catmull-Rom fetch (the same sums, without the 48 loads a pixel)
+        # history says and the splat (whose 2x2 samples lie among the nine) gives it too, so the run's pixels are that
+        # colour: no Catmull-Rom fetch (48 loads a pixel), splat or blend; only the history's weight is still fetched
         flat = rectify and lo0 == hi0 and lo1 == hi1 and lo2 == hi2
         f0, f1, f2 = _to_rgb(lo0, lo1, lo2)
         last_ix = -2
         k0 = k1 = k2 = k3 = (np.float32(0.0), np.float32(0.0), np.float32(0.0))  # the four columns' RGB
         for x in range(runs[lx], runs[lx + 1]):
-            x0 = int(cols[x, 1])
-            x1 = int(cols[x, 2])
             # 1. the current estimate: 2x2 Gaussian splat, blended with bilinear weights by ``tent``
-            w00, w01, w10, w11, a, inv = _splat_weights(wy0, wy1, cols[x, 3], cols[x, 4], dy0, cols[x, 5], tent)
-            e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
-            e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
-            e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
+            if flat:  # its four samples are that one colour: only its confidence is wanted, as _splat_weights sums it
+                e0, e1, e2 = f0, f1, f2
+                wx0, wx1 = cols[x, 3], cols[x, 4]
+                a = wy0 * wx0 + wy0 * wx1 + wy1 * wx0 + wy1 * wx1
+            else:
+                x0 = int(cols[x, 1])
+                x1 = int(cols[x, 2])
+                w00, w01, w10, w11, a, inv = _splat_weights(wy0, wy1, cols[x, 3], cols[x, 4], dy0, cols[x, 5], tent)
+                e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
+                e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
+                e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
             n = 0.0
             h0 = h1 = h2 = 0.0
             sx = x + mx
@@ -187,7 +195,9 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                     if rectify:  # 5. clamp into the YCoCg box of the 3x3 LR neighbourhood
                         h0, h1, h2 = _rectify(h0, h1, h2, lo0, lo1, lo2, hi0, hi1, hi2)
             # 7. blend
-            if n > 0.0:
+            if flat:  # the history clamped into a one-colour box and the estimate are that colour, and so is the blend
+                o0, o1, o2 = f0, f1, f2
+            elif n > 0.0:
                 inv = 1.0 / (n + a)
                 o0 = (n * h0 + a * e0) * inv
                 o1 = (n * h1 + a * e1) * inv
