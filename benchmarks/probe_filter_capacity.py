@@ -33,7 +33,8 @@ from tqdm import tqdm
 
 import volsr_core.runtime.upscaler as upscaler
 from volsr_core.apps.bench.scenes import load_bench_volume
-from volsr_core.runtime.pipeline import STRETCH_CUBIC_A, Pipeline
+from volsr_core.runtime.pipeline import Pipeline
+from volsr_core.runtime.upscaler import STRETCH_CUBIC_A
 from volsr_core.scene.camera_paths import orbit_around
 from volsr_core.sr.network import second_orientation
 from volsr_core.sr.network_config import ORIENTATION_LUMA

@@ -20,7 +20,8 @@ from probe_stretch_kernel import WARMUP, psnr
 from tqdm import tqdm
 
 from volsr_core.render.raycaster import RayCaster
-from volsr_core.runtime.pipeline import STRETCH_CUBIC_A, Pipeline
+from volsr_core.runtime.pipeline import Pipeline
+from volsr_core.runtime.upscaler import STRETCH_CUBIC_A
 from volsr_core.temporal import render_supersampled
 from volsr_core.temporal.ground_truth import supersampled_truth
 from volsr_core.temporal.resample import resize_bicubic

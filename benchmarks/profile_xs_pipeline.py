@@ -1,6 +1,7 @@
 """Where VolSR XS's time after the LR render goes inside a ``Pipeline``: median ms per frame of the whole step and
-of its kernels (TAAU's prepass and kernel, or at 4x and more the layered TAAU's, the filter and, with ``--stretch``
-K, the bicubic stretch of XS at 1/K of the size: ``Pipeline(..., stretch=K)``).
+of its kernels (TAAU's prepass and kernel, or at 4x and more the layered TAAU's, and the filter; with ``--stretch``
+2, XS at half the size, ``Pipeline(..., stretch=2)``, the filter's time holds the bicubic stretch, which it makes
+in its own passes).
 
     python benchmarks/profile_xs_pipeline.py [--volume MR_Gd.nii.gz:MR-Default] [--size 1024] [--scale 2]
                                              [--frames 24] [--stretch 2]
@@ -17,7 +18,6 @@ from typing import Callable
 
 from bench_taau import orbit_parser, orbit_scene
 
-import volsr_core.runtime.pipeline as pipeline_module
 import volsr_core.runtime.upscaler as upscaler
 import volsr_core.temporal.layered as layered
 import volsr_core.temporal.taau as taau
@@ -50,7 +50,7 @@ def main() -> None:
     scene, _, cameras = orbit_scene(args)
     times: dict[str, list[float]] = {}
     for module, name in ((taau, "_prepass"), (taau, "_kernel"), (layered, "_prepass"), (layered, "_kernel"),
-                         (upscaler, "filter_image"), (pipeline_module, "resize_bicubic")):
+                         (upscaler, "filter_image")):
         timed(module, name, times)
     pipeline = Pipeline(scene.volume, scene.transfer_function, scale=args.scale, variant="XS",
                         size=(args.size, args.size), threads=2, stretch=args.stretch)

@@ -29,6 +29,7 @@ from volsr_core.scene import Volume, get_preset  # noqa: E402
 from volsr_core.scene.camera_paths import orbit_around  # noqa: E402
 from volsr_core.sr.least_squares import fit_base_filter, is_closed_form  # noqa: E402
 from volsr_core.sr.network import BaseFilter, SuperResolutionNet, variant_config  # noqa: E402
+from volsr_core.temporal.resample import resize_bicubic  # noqa: E402
 from volsr_core.temporal.taau import TemporalUpsampler, view_rotation  # noqa: E402
 
 
@@ -246,6 +247,28 @@ def test_an_output_clipped_in_the_kernel_equals_the_output_clipped_after_it():
         assert plain.min() < 0.0 and plain.max() > 1.0, "the weights must overshoot for the test to mean something"
         assert np.array_equal(filter_image(image, weights[:n], bias[:n], clip_output=True), np.clip(plain, 0.0, 1.0))
 
+
+def test_a_filter_that_stretches_by_two_makes_the_filtered_image_stretched_bicubically():
+    """``stretch=2``: the bands double their rows as they filter them and the rows are mixed after, which gives
+    resize_bicubic's stretch of the filtered image, clipped as it is (one filter and a pair, clipped and not, a height
+    of several bands and one of a few rows, the second frame through kept work buffers); other stretches are refused."""
+    rng = np.random.default_rng(11)
+    weights, bias = rng.normal(0, 0.4, (2, 3, 5, 5)).astype(np.float32), rng.normal(0, 0.3, (2, 3)).astype(np.float32)
+    scratch = Scratch()
+    for shape in ((2 * BAND_ROWS + 7, 21, 3), (5, 9, 3), (5, 9, 3)):
+        image = rng.random(shape, dtype=np.float32)
+        for n in (1, 2):
+            for clip in (False, True):
+                filtered = filter_image(image, weights[:n], bias[:n], clip_output=clip)
+                expected = resize_bicubic(filtered, 2 * shape[1], 2 * shape[0], a=-0.75,
+                                          clamp=(0.0, 1.0) if clip else None)
+                stretched = filter_image(image, weights[:n], bias[:n], scratch=scratch, clip_output=clip, stretch=2,
+                                         stretch_a=-0.75)
+                assert stretched.shape == (2 * shape[0], 2 * shape[1], 3)
+                np.testing.assert_allclose(stretched, expected, atol=1e-6)
+        assert not clip or (expected.min() == 0.0 and expected.max() == 1.0), "the stretch's clip is tested"
+    with pytest.raises(ValueError, match="stretch"):
+        filter_image(image, weights, bias, stretch=3)
 
 def test_work_buffers_kept_between_frames_change_no_result():
     rng = np.random.default_rng(5)

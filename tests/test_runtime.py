@@ -271,8 +271,8 @@ def test_the_upscaler_drops_the_history_on_a_camera_jump_in_its_frames():
 def test_a_stretched_pipeline_is_the_model_at_a_smaller_size_then_bicubic():
     """``Pipeline(scale=4, stretch=2)`` renders the 1/4-size frame, runs the 2x model to half the size and stretches
     its image (Keys' cubic, a = -0.75, clamped to [0, 1]): the images of a 2x pipeline at that size stretched by
-    ``resize_bicubic``, frame by frame, at a size the scale does not divide (the LR frame ceil(size / 4), the
-    stretched image cropped as an unstretched one is)."""
+    ``resize_bicubic``, frame by frame, to float rounding (XS's filter doubles its rows as it makes them), at a size
+    the scale does not divide (the LR frame ceil(size / 4), the stretched image cropped as an unstretched one is)."""
     from volsr_core.io import make_phantom
     from volsr_core.runtime.methods import VolSR
     from volsr_core.runtime.pipeline import Pipeline
@@ -290,7 +290,7 @@ def test_a_stretched_pipeline_is_the_model_at_a_smaller_size_then_bicubic():
     for k, camera in enumerate(orbit(Camera.framing(volume.bounds), 4, degrees=3.0)):
         image = stretched.render(camera)
         expected = resize_bicubic(inner.render(camera), 68, 52, a=-0.75, clamp=(0.0, 1.0))[:50, :66]
-        assert image.shape == (50, 66, 3) and np.abs(image - expected).max() == 0.0, k
+        assert image.shape == (50, 66, 3) and np.abs(image - expected).max() < 1e-6, k
         assert stretched.last_low_resolution.jitter == pytest.approx(halton_jitter(k, jitter_phases(2)))
     assert image.std() > 0.01
     assert stretched.last_timings["network_ms"] > 0

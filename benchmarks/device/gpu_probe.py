@@ -174,7 +174,7 @@ def bicubic_ms(height: int, width: int, out_height: int, out_width: int, repeats
     ``Pipeline(..., stretch=k)`` runs on the device) of a ``width`` x ``height`` device image to the output size."""
     from numba import cuda
 
-    from volsr_core.runtime.pipeline import STRETCH_CUBIC_A
+    from volsr_core.runtime.upscaler import STRETCH_CUBIC_A
     from volsr_core.temporal.frames_cuda import resize_bicubic_device
 
     image = cuda.to_device(np.random.default_rng(0).random((height, width, 3), dtype=np.float32))

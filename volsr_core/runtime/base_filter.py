@@ -30,6 +30,7 @@ import numpy as np
 
 from volsr_core.errors import InputError
 from volsr_core.sr.network_config import ORIENTATION_LUMA, ORIENTATION_SMOOTHING
+from volsr_core.temporal.resample import _across_planes_doubled, _axis_taps, _doubling_weights, _mix_rows
 
 FILTER_KEY = "volsr.base_filter"  # ONNX metadata: {"weights": (3, k, k) or (2, 3, k, k) nested lists, "bias": 3 or 2x3}
 LUMA = np.asarray(ORIENTATION_LUMA, dtype=np.float32)
@@ -58,6 +59,7 @@ L2 at 1024² wide (about 1 MB), where whole-image planes went to memory between 
 images, 16 to 64 rows alike: 0.62-0.90 of the time at 1024² in two runs, 0.82 at 512²)."""
 _NB = dict(fastmath=True, error_model="numpy", boundscheck=False, cache=True)
 _FLOAT32_MAX = np.finfo(np.float32).max
+_NO_PHASES = _doubling_weights(1, 3, True, -0.5)  # an unstretched call's (read-only, empty) doubling weights
 
 
 @numba.njit(**_NB)
@@ -170,26 +172,29 @@ def _band_orientation(planes: np.ndarray, y0: int, y1: int, height: int, halo: i
 
 
 @functools.lru_cache(maxsize=None)
-def _filter_bands(taps: int) -> Callable:
-    """The kernel for one filter of ``taps`` x ``taps`` (compiled once per size, cached on disk):
-    ``bands(image, weights, bias, low, high, planes, ends, total, out)`` fills ``out`` (H, W, C) from ``image``
-    (H, W, C) through ``weights`` (1, C, k, k) and ``bias`` (1, C), :data:`BAND_ROWS` rows per band (``planes``
-    (bands, C, BAND_ROWS + k - 1, W + k - 1), ``ends`` (bands, BAND_ROWS + k - 1, 2) int64 and ``total``
+def _filter_bands(taps: int, doubled: bool) -> Callable:
+    """The kernel for one filter of ``taps`` x ``taps`` (compiled once per size and ``doubled``, cached on disk):
+    ``bands(image, weights, bias, low, high, planes, ends, total, lines, phase_w, out)`` fills ``out`` (H, W, C) from
+    ``image`` (H, W, C) through ``weights`` (1, C, k, k) and ``bias`` (1, C), :data:`BAND_ROWS` rows per band
+    (``planes`` (bands, C, BAND_ROWS + k - 1, W + k - 1), ``ends`` (bands, BAND_ROWS + k - 1, 2) int64 and ``total``
     (bands, W) its work buffers): the band's clipped, padded planes (:func:`_fill_band`) and their rows' flat ends
     (:func:`_flat_ends`), then per row and channel, per tap row, each pixel's ``taps`` products summed in registers
     into a row accumulator (the tap count a compile-time constant, so the taps unroll and the pixels vectorise:
     1.7 times as fast at 9 taps as a pass per tap over the row) between the row's flat ends
-    (:func:`_sums_needed`; one constant each side), clamped to [``low``, ``high``] and interleaved into ``out``."""
+    (:func:`_sums_needed`; one constant each side), clamped to [``low``, ``high``] and interleaved into ``out``.
+    ``doubled``: each row goes into the band's row of ``lines`` (bands, C, W), channels apart, instead and is written
+    to ``out`` (H, 2W, C) doubled in width by the resampling's first stage (``_across_planes_doubled`` with
+    ``phase_w``): the first pass of the filter and a 2x stretch in one (:func:`filter_image`)."""
     pad = taps // 2
 
     @numba.njit(parallel=True, **_NB)
-    def bands(image, weights, bias, low, high, planes, ends, total, out):
-        height, width, channels = out.shape
+    def bands(image, weights, bias, low, high, planes, ends, total, lines, phase_w, out):
+        height, width, channels = image.shape
         last = planes.shape[3] - 1
         for b in numba.prange(planes.shape[0]):
             y0 = b * BAND_ROWS
             y1 = min(y0 + BAND_ROWS, height)
-            band, row_total = planes[b], total[b]
+            band, row_total, line = planes[b], total[b], lines[b]
             _fill_band(image, y0 - pad, pad, band, y1 - y0 + 2 * pad)
             _flat_ends(band, y1 - y0 + 2 * pad, ends[b])
             for y in range(y0, y1):
@@ -210,32 +215,39 @@ def _filter_bands(taps: int) -> Callable:
                     row_total[:start] = _constant_sum(weights, bias, 0, c, band[c, y - y0, 0])
                     row_total[stop:] = _constant_sum(weights, bias, 0, c, band[c, y - y0, last])
                     for x in range(width):
-                        out[y, x, c] = min(max(row_total[x], low), high)
+                        if doubled:
+                            line[c, x] = min(max(row_total[x], low), high)
+                        else:
+                            out[y, x, c] = min(max(row_total[x], low), high)
+                if doubled:
+                    _across_planes_doubled(line, phase_w, out[y].reshape(out.shape[1] * out.shape[2]))
 
     return bands
 
 
 @functools.lru_cache(maxsize=None)
-def _filter_bands_pair(taps: int) -> Callable:
+def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
     """:func:`_filter_bands` for a pair (``bands(image, weights, bias, luma_weights, smoothing, low, high, planes,
-    ends, luma, across, work, out)``, ``weights`` (2, C, k, k), ``bias`` (2, C); per band, ``planes`` (C,
-    BAND_ROWS + 2 * halo, W + k - 1) with halo = max(k // 2, r + 1) for ``smoothing``'s radius r, ``ends`` of its
-    rows, ``luma`` of the planes' rows, ``across`` (BAND_ROWS + 2r, W) and ``work`` (4, W + 2r)): the band's
-    orientation stages (:func:`_band_orientation`), then per row the vertical smoothing's sign, and both filters
-    summed in the same pass (one load, two products) between the row's flat ends, each pixel taking filter
-    ``second`` by a blend with weight 0 or 1 (no branch, so it vectorises too)."""
+    ends, luma, across, work, lines, phase_w, out)``, ``weights`` (2, C, k, k), ``bias`` (2, C), ``lines``,
+    ``phase_w`` and ``doubled`` as there; per band, ``planes`` (C, BAND_ROWS + 2 * halo, W + k - 1) with halo =
+    max(k // 2, r + 1) for ``smoothing``'s radius r, ``ends`` of its rows, ``luma`` of the planes' rows, ``across``
+    (BAND_ROWS + 2r, W) and ``work`` (4, W + 2r)): the band's orientation stages (:func:`_band_orientation`), then
+    per row the vertical smoothing's sign, and both filters summed in the same pass (one load, two products) between
+    the row's flat ends, each pixel taking filter ``second`` by a blend with weight 0 or 1 (no branch, so it
+    vectorises too)."""
     pad = taps // 2
 
     @numba.njit(parallel=True, **_NB)
-    def bands(image, weights, bias, luma_weights, smoothing, low, high, planes, ends, luma, across, work, out):
-        height, width, channels = out.shape
+    def bands(image, weights, bias, luma_weights, smoothing, low, high, planes, ends, luma, across, work, lines,
+              phase_w, out):
+        height, width, channels = image.shape
         r = smoothing.shape[0] // 2
         halo = max(pad, r + 1)
         last = planes.shape[3] - 1
         for b in numba.prange(planes.shape[0]):
             y0 = b * BAND_ROWS
             y1 = min(y0 + BAND_ROWS, height)
-            band = planes[b]
+            band, line = planes[b], lines[b]
             first, other, pick = work[b, 1], work[b, 2], work[b, 3]
             _fill_band(image, y0 - halo, pad, band, y1 - y0 + 2 * halo)
             _flat_ends(band, y1 - y0 + 2 * halo, ends[b])
@@ -270,18 +282,31 @@ def _filter_bands_pair(taps: int) -> Callable:
                     first[stop:width] = _constant_sum(weights, bias, 0, c, band[c, j0, last])
                     other[stop:width] = _constant_sum(weights, bias, 1, c, band[c, j0, last])
                     for x in range(width):
-                        out[y, x, c] = min(max(first[x] + pick[x] * (other[x] - first[x]), low), high)
+                        if doubled:
+                            line[c, x] = min(max(first[x] + pick[x] * (other[x] - first[x]), low), high)
+                        else:
+                            out[y, x, c] = min(max(first[x] + pick[x] * (other[x] - first[x]), low), high)
+                if doubled:
+                    _across_planes_doubled(line, phase_w, out[y].reshape(out.shape[1] * out.shape[2]))
 
     return bands
 
 
 def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
-                 scratch: Scratch | None = None, clip_output: bool = False) -> np.ndarray:
+                 scratch: Scratch | None = None, clip_output: bool = False, stretch: int = 1,
+                 stretch_a: float = -0.5) -> np.ndarray:
     """``image`` (H, W, 3), clipped to [0, 1] and edge-padded, through ``weights`` (n, 3, k, k) and ``bias``
     (n, 3), n = 1 or a pair chosen per pixel by orientation: a new (H, W, 3) float32 image, what the network's
     :class:`~volsr_core.sr.network.BaseFilter` computes (channels first there). ``scratch`` keeps the work
     buffers for the next call (a fresh set each call without it); ``clip_output`` clips the result to [0, 1] in
-    the same pass (what a displayed frame needs, without a second pass over it)."""
+    the same pass (what a displayed frame needs, without a second pass over it).
+
+    ``stretch`` 2 returns the result stretched to (2H, 2W, 3) by Keys' cubic convolution with ``stretch_a``
+    (:func:`~volsr_core.temporal.resample.resize_bicubic`'s values, clipped as the result is): each filtered row is
+    doubled in width as the filter's bands make it, then the rows are mixed, so the filtered image is never written
+    whole (the stretch of ``Pipeline(..., stretch=2)``)."""
+    if stretch not in (1, 2):
+        raise ValueError(f"the filter's stretch is 1 or 2, got {stretch!r}")
     scratch = Scratch() if scratch is None else scratch
     image = np.ascontiguousarray(image, dtype=np.float32)
     weights = np.ascontiguousarray(weights, dtype=np.float32)
@@ -289,24 +314,33 @@ def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
     height, width, channels = image.shape
     pad = weights.shape[2] // 2
     n_bands = -(-height // BAND_ROWS)
-    out = np.empty(image.shape, np.float32)
+    doubled = stretch == 2
+    # doubled, the bands write their rows doubled in width into ``rows``, and the rows are mixed into ``out`` after
+    out = np.empty((stretch * height, stretch * width, channels), np.float32)
+    rows = scratch.get("doubled rows", (height, 2 * width, channels)) if doubled else out
+    lines = scratch.get("lines", (n_bands, channels, width) if doubled else (1, 1, 1))
+    phase_w = _doubling_weights(width, 2 * width, True, float(stretch_a)) if doubled else _NO_PHASES
     # the kernels clamp as they write ``out``; unclipped, to finite bounds (their fastmath assumes no infinities)
     low, high = (np.float32(0.0), np.float32(1.0)) if clip_output else (-_FLOAT32_MAX, _FLOAT32_MAX)
     if weights.shape[0] > 1:
         r = SMOOTHING.shape[0] // 2
-        rows = BAND_ROWS + 2 * max(pad, r + 1)
-        planes = scratch.get("planes", (n_bands, channels, rows, width + 2 * pad))
-        luma = scratch.get("luma", (n_bands, rows, width + 2 * pad))
+        band_rows = BAND_ROWS + 2 * max(pad, r + 1)
+        planes = scratch.get("planes", (n_bands, channels, band_rows, width + 2 * pad))
+        luma = scratch.get("luma", (n_bands, band_rows, width + 2 * pad))
         across = scratch.get("across", (n_bands, BAND_ROWS + 2 * r, width))
         work = scratch.get("work", (n_bands, 4, width + 2 * r))
-        ends = scratch.get("ends", (n_bands, rows, 2), np.int64)
-        _filter_bands_pair(weights.shape[2])(image, weights, bias, LUMA, SMOOTHING, low, high, planes, ends, luma,
-                                             across, work, out)
+        ends = scratch.get("ends", (n_bands, band_rows, 2), np.int64)
+        _filter_bands_pair(weights.shape[2], doubled)(image, weights, bias, LUMA, SMOOTHING, low, high, planes, ends,
+                                                      luma, across, work, lines, phase_w, rows)
     else:
         planes = scratch.get("planes", (n_bands, channels, BAND_ROWS + 2 * pad, width + 2 * pad))
         total = scratch.get("total", (n_bands, width))
         ends = scratch.get("ends", (n_bands, BAND_ROWS + 2 * pad, 2), np.int64)
-        _filter_bands(weights.shape[2])(image, weights, bias, low, high, planes, ends, total, out)
+        _filter_bands(weights.shape[2], doubled)(image, weights, bias, low, high, planes, ends, total, lines, phase_w,
+                                                 rows)
+    if doubled:
+        _mix_rows(rows.reshape(height, 2 * width * channels), *_axis_taps(height, 2 * height, True, float(stretch_a)),
+                  low, high, out)
     return out
 
 

@@ -22,10 +22,8 @@ from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
-from volsr_core.temporal.resample import resize_bicubic
 
 STRETCH_FROM = 2.0  # stretch "auto": by 2 where a voxel spans at least this many output pixels (docs/performance.md)
-STRETCH_CUBIC_A = -0.75  # Keys' a of the stretch (PyTorch's, OpenCV's): the best of -0.5..-1.5, docs/performance.md
 
 
 class KeepsLastFrame:
@@ -49,9 +47,10 @@ class Pipeline(KeepsLastFrame):
       ``stretch``, or for a shipped model :data:`~volsr_core.runtime.models.DEFAULT_SCALE` (2) times ``stretch``;
       a model of a scale other than ``scale`` / ``stretch`` is an error;
     - ``stretch``: 1 (the default), or k > 1: the model makes 1/k of ``size`` and its image is stretched by k to
-      ``size`` (the same view, as VTK stretches a reduced rendering; Keys' cubic with :data:`STRETCH_CUBIC_A`, clamped
-      to [0, 1]: sharper than bilinear, for about its time), so that its history and filter work on
-      k² times fewer pixels: where a voxel spans several output pixels, detail the frames' samples do not hold
+      ``size`` by the upscaler (the same view, as VTK stretches a reduced rendering; Keys' cubic with
+      :data:`~volsr_core.runtime.upscaler.STRETCH_CUBIC_A`, clamped to [0, 1]: sharper than bilinear, for about its
+      time), so that its history and filter work on k² times fewer pixels: where a voxel spans several output pixels,
+      detail the frames' samples do not hold
       anyway (docs/performance.md, "Where the history lives"); "auto": at an even ``scale`` of 4 or more with a
       shipped model (``model`` None) at half of it, 2 where the view's voxels span at least :data:`STRETCH_FROM`
       output pixels (``RayCaster.pixels_per_voxel`` at ``size``), else 1, chosen at each new history (the first frame, a
@@ -95,7 +94,7 @@ class Pipeline(KeepsLastFrame):
         for k in _stretches(stretch, scale, model, variant):
             engine = _open_model(model, scale, k, variant, backend=backend, device=device, fp16=fp16, threads=threads)
             self._paths[k] = (engine, StatefulUpscaler(engine, max_turn=max_turn, max_zoom=max_zoom, slabs=slabs,
-                                                       device=device))
+                                                       device=device, stretch=k))
         self.auto_stretch = len(self._paths) > 1
         self._use(min(self._paths))
         self.size = (int(size[0]), int(size[1]))
@@ -113,11 +112,6 @@ class Pipeline(KeepsLastFrame):
         self.model_scale = int(self.engine.config.scale)
         self.scale = self.model_scale * stretch
         self.slabs = self.upscaler.slabs
-        self._stretch = resize_bicubic  # the model's image to the full size, where the upscaler leaves it
-        if self.upscaler.on_device:
-            from volsr_core.temporal.frames_cuda import resize_bicubic_device
-
-            self._stretch = resize_bicubic_device
 
     @property
     def low_resolution_size(self) -> tuple[int, int]:
@@ -176,9 +170,7 @@ class Pipeline(KeepsLastFrame):
         lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame,
                                 slabs=self.slabs, on_device=self.upscaler.on_device)
         rendered = time.perf_counter()
-        image = self.upscaler.upscale(lr, self.caster.background)
-        if self.stretch > 1:
-            image = self._stretch(image, w * self.scale, h * self.scale, a=STRETCH_CUBIC_A, clamp=(0.0, 1.0))
+        image = self.upscaler.upscale(lr, self.caster.background)  # stretched by the upscaler of this stretch
         done = ready_at(image)
         image, readback_ms = to_host(image)
         self.last_timings = {"render_ms": 1000 * (rendered - started), "network_ms": 1000 * (done - rendered),

@@ -17,7 +17,7 @@ from volsr_core.runtime.base_filter import Scratch, filter_image
 from volsr_core.runtime.layout import to_channels_first, to_image_clipped
 from volsr_core.scene.camera import Camera, rotation_between
 from volsr_core.sr.history import HistoryFeed, history_mode
-from volsr_core.temporal.resample import upscale_bilinear
+from volsr_core.temporal.resample import resize_bicubic, upscale_bilinear
 from volsr_core.temporal.taau import view_rotation
 
 
@@ -76,6 +76,7 @@ def camera_jump(previous: Camera | None, camera: Camera, max_turn: float = 30.0,
     return ""
 
 
+STRETCH_CUBIC_A = -0.75  # Keys' a of the stretch (PyTorch's, OpenCV's): the best of -0.5..-1.5, docs/performance.md
 LAYERED_SLABS = 2  # depth slabs of the layered TAAU where it is the default (docs/temporal.md, "Layered history")
 LAYERED_FROM_SCALE = 4  # the smallest scale it is the default at: at 2x TAAU's own history is the better one
 
@@ -106,7 +107,7 @@ class StatefulUpscaler:
 
     ``upscale(frame)`` takes one LR :class:`FeatureFrame` (rendered with jitter and the previous
     camera, so its motion vectors point into the previous frame) and returns the (H, W, 3) float32
-    image in [0, 1], H = h * scale. It keeps the last N frames and the network's history
+    image in [0, 1], H = h * scale * stretch. It keeps the last N frames and the network's history
     (:class:`~volsr_core.sr.history.HistoryFeed`: its previous output, or the TAAU estimate it
     refines). The history is dropped (the next frame starts afresh) when:
 
@@ -126,6 +127,10 @@ class StatefulUpscaler:
     (``RayCaster.render(..., slabs=K)``) instead of the TAAU on their colour, and the filter on its estimate;
     0 runs the TAAU; None (the default) takes :func:`default_slabs` of the engine.
 
+    ``stretch`` k > 1 returns the images stretched by k (a model at 1/k of the output size: ``Pipeline(...,
+    stretch=k)``), by Keys' cubic convolution with :data:`STRETCH_CUBIC_A`, clamped to [0, 1]; on the CPU variant XS's
+    filter does a stretch by 2 in its own passes (:func:`~volsr_core.runtime.base_filter.filter_image`).
+
     ``device`` "cuda" keeps such a model's work on the GPU (:attr:`on_device`): it takes frames rendered there
     (``RayCaster.render(..., on_device=True)``), runs the TAAU and the filter as CUDA kernels and returns the
     (H, W, 3) result there, a device array for the caller to copy back (``Pipeline`` does, after timing the step).
@@ -133,7 +138,10 @@ class StatefulUpscaler:
     """
 
     def __init__(self, engine: Any, max_motion: float = 0.25, max_offscreen: float = 0.5, max_turn: float = 30.0,
-                 max_zoom: float = 2.0, slabs: int | None = None, device: str = "cpu"):
+                 max_zoom: float = 2.0, slabs: int | None = None, device: str = "cpu", stretch: int = 1):
+        if stretch < 1 or int(stretch) != stretch:
+            raise ValueError(f"the stretch must be a whole number >= 1, got {stretch!r}")
+        self.stretch = int(stretch)
         self.engine = engine
         self.config = engine.config
         self.max_motion, self.max_offscreen = float(max_motion), float(max_offscreen)
@@ -239,7 +247,19 @@ class StatefulUpscaler:
             history = to_channels_first(parts, self._scratch.get("history", shape))[None]
         out = self.engine(lr, vectors, jitters, history)[0]  # (3, H, W)
         self.history.keep(out.transpose(1, 2, 0))
-        return to_image_clipped(out)
+        return self._stretched(to_image_clipped(out))
+
+    def _stretched(self, image):
+        """``image`` (H, W, 3) stretched by :attr:`stretch` (Keys' cubic, :data:`STRETCH_CUBIC_A`, clamped to [0, 1])
+        where it lies, on the GPU or in host memory; as it is at stretch 1."""
+        if self.stretch == 1:
+            return image
+        height, width = image.shape[0] * self.stretch, image.shape[1] * self.stretch
+        if self.on_device:
+            from volsr_core.temporal.frames_cuda import resize_bicubic_device
+
+            return resize_bicubic_device(image, width, height, a=STRETCH_CUBIC_A, clamp=(0.0, 1.0))
+        return resize_bicubic(image, width, height, a=STRETCH_CUBIC_A, clamp=(0.0, 1.0))
 
     def _filtered(self, frame: FeatureFrame, background: Sequence[float]) -> np.ndarray:
         """:meth:`upscale` for a network that is only its base filter, run by the engine's CPU kernel
@@ -279,8 +299,11 @@ class StatefulUpscaler:
         estimate = None if self.history.taau is None else scratch.get("estimate", shape)
         base = self.history(colour, motion, tuple(frame.jitter), frame.motion_depth, rotation, frame.pixels_per_voxel,
                             slabs=frame.slabs, background=background, out=estimate)
-        if self._device_filter is not None:
-            return self._device_filter.filter(base, clip_output=True)  # on the device: the caller copies it back
+        if self._device_filter is not None:  # on the device: the caller copies it back
+            return self._stretched(self._device_filter.filter(base, clip_output=True))
         if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale
             base = upscale_bilinear(colour, self.config.scale)
-        return filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True)
+        if self.stretch == 2:  # the filter's bands double their rows as they make them: no filtered image in between
+            return filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True, stretch=2,
+                                stretch_a=STRETCH_CUBIC_A)
+        return self._stretched(filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True))

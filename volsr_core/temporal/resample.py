@@ -104,6 +104,25 @@ def _across_row_doubled(line, phase_w, out):
 
 
 @numba.njit(fastmath=True, boundscheck=False, cache=True)
+def _across_planes_doubled(planes, phase_w, out):
+    """:func:`_across_row_doubled` (cubic) for a row given as its channels apart, ``planes`` (C, w): the same sums into
+    the same interleaved ``out`` (2w * C), from one channel's plane at a time (XS's filter makes its rows so:
+    :func:`~volsr_core.runtime.base_filter.filter_image` with ``stretch=2``)."""
+    channels, w = planes.shape[0], planes.shape[1]
+    e0, e1, e2, e3 = phase_w[0, 0], phase_w[0, 1], phase_w[0, 2], phase_w[0, 3]
+    o0, o1, o2, o3 = phase_w[1, 0], phase_w[1, 1], phase_w[1, 2], phase_w[1, 3]
+    for c in range(channels):
+        line = planes[c]
+        a0 = a1 = a2 = line[0]
+        a3 = line[min(1, w - 1)]
+        for k in range(w):
+            a4 = line[min(k + 2, w - 1)]
+            out[2 * channels * k + c] = (e0 * a0 + e1 * a1) + (e2 * a2 + e3 * a3)
+            out[2 * channels * k + channels + c] = (o0 * a1 + o1 * a2) + (o2 * a3 + o3 * a4)
+            a0, a1, a2, a3 = a1, a2, a3, a4
+
+
+@numba.njit(fastmath=True, boundscheck=False, cache=True)
 def _down_row(across, taps, weights, low, high, out):
     """Stage 2, down the column: ``out[k]`` = sum over taps i of ``weights[i] across[taps[i], k]`` (2 or 4 taps, one
     contiguous pass), clamped to [``low``, ``high``]."""
@@ -119,11 +138,22 @@ def _down_row(across, taps, weights, low, high, out):
 
 
 @numba.njit(parallel=True, cache=True)
+def _mix_rows(across, rows, row_w, low, high, out):
+    """Stage 2 over the rows of ``out`` (H, W, C): output row y from the rows ``rows[y]`` of ``across`` (h, W * C, the
+    input rows resampled along x) weighted by ``row_w[y]`` (:func:`_axis_taps` of the height), clamped to [``low``,
+    ``high``]; one thread team over the rows. Also the second pass of XS's filter and stretch in one
+    (:func:`~volsr_core.runtime.base_filter.filter_image` with ``stretch=2``), whose first writes ``across``."""
+    flat = out.reshape(out.shape[0], out.shape[1] * out.shape[2])
+    for y in numba.prange(out.shape[0]):
+        _down_row(across, rows[y], row_w[y], low, high, flat[y])
+
+
+@numba.njit(parallel=True, cache=True)
 def _resample_kernel(planes, rows, row_w, cols, col_w, phase_w, low, high, out):
     """Separable: every input row resampled along x (stage 1; an RGB row doubled in width, ``phase_w`` not empty,
-    from a sliding window: :func:`_across_row_doubled`), then every output row mixed from those rows (stage 2): 2 x 2 or
-    4 x 4 taps in 2 + 2 or 4 + 4 multiply-adds a pixel (2.3-5 times faster than mixing the 2D taps per pixel for
-    bilinear, 10-20 times for cubic, at 1024² on 2 cores: ``benchmarks/bench_resize.py``)."""
+    from a sliding window: :func:`_across_row_doubled`), then every output row mixed from those rows (stage 2,
+    :func:`_mix_rows`): 2 x 2 or 4 x 4 taps in 2 + 2 or 4 + 4 multiply-adds a pixel (2.3-5 times faster than mixing
+    the 2D taps per pixel for bilinear, 10-20 times for cubic, at 1024² on 2 cores: ``benchmarks/bench_resize.py``)."""
     channels, width = planes.shape[2], out.shape[1]
     across = np.empty((planes.shape[0], width * channels), dtype=np.float32)
     for y in numba.prange(planes.shape[0]):
@@ -131,9 +161,7 @@ def _resample_kernel(planes, rows, row_w, cols, col_w, phase_w, low, high, out):
             _across_row_doubled(planes[y], phase_w, across[y])
         else:
             _across_row(planes[y], cols, col_w, across[y])
-    flat = out.reshape(out.shape[0], width * channels)
-    for y in numba.prange(out.shape[0]):
-        _down_row(across, rows[y], row_w[y], low, high, flat[y])
+    _mix_rows(across, rows, row_w, low, high, out)
 
 
 def _resize(image: np.ndarray, height: int, width: int, cubic: bool, a: float = -0.5,
