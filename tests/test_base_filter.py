@@ -270,6 +270,7 @@ def test_a_filter_that_stretches_by_two_makes_the_filtered_image_stretched_bicub
     with pytest.raises(ValueError, match="stretch"):
         filter_image(image, weights, bias, stretch=3)
 
+
 def test_work_buffers_kept_between_frames_change_no_result():
     rng = np.random.default_rng(5)
     weights, bias = rng.normal(0, 0.2, (2, 3, 5, 5)).astype(np.float32), rng.normal(0, 0.1, (2, 3)).astype(np.float32)

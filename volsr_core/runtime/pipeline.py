@@ -50,11 +50,11 @@ class Pipeline(KeepsLastFrame):
       ``size`` by the upscaler (the same view, as VTK stretches a reduced rendering; Keys' cubic with
       :data:`~volsr_core.runtime.upscaler.STRETCH_CUBIC_A`, clamped to [0, 1]: sharper than bilinear, for about its
       time), so that its history and filter work on k² times fewer pixels: where a voxel spans several output pixels,
-      detail the frames' samples do not hold
-      anyway (docs/performance.md, "Where the history lives"); "auto": at an even ``scale`` of 4 or more with a
-      shipped model (``model`` None) at half of it, 2 where the view's voxels span at least :data:`STRETCH_FROM`
-      output pixels (``RayCaster.pixels_per_voxel`` at ``size``), else 1, chosen at each new history (the first frame, a
-      :meth:`reset` or :meth:`update` that changed something), both models opened up front; otherwise 1;
+      detail the frames' samples do not hold anyway (docs/performance.md, "Where the history lives"); "auto": at an
+      even ``scale`` of 4 or more with a shipped model (``model`` None) at half of it, 2 where the view's voxels span
+      at least :data:`STRETCH_FROM` output pixels (``RayCaster.pixels_per_voxel`` at ``size``), else 1, chosen at each
+      new history (the first frame, a :meth:`reset` or :meth:`update` that changed something), both models opened up
+      front; otherwise 1;
     - ``variant``: None: :func:`~volsr_core.runtime.models.default_variant`, the fastest shipped at
       ``scale`` (XS at 2x: the model that pays off on a CPU, docs/performance.md);
     - ``size``: output (width, height) in pixels; any size: the LR frame is ceil(size / scale)
