@@ -25,6 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 from types import ModuleType
+from typing import Callable
 
 import numpy as np
 from bench_taau import HISTORY_FRAMES, lr_frames, module_at, orbit_parser, orbit_scene, table_header, table_row
@@ -40,16 +41,21 @@ KERNEL = "volsr_core/runtime/base_filter.py"
 ROUNDS = 5  # passes over the estimates
 
 
-def filtered(module: ModuleType, estimate: np.ndarray, weights: tuple, scratch, stretch: int) -> np.ndarray:
-    """``module``'s filter on ``estimate``; with ``stretch`` 2 clipped and stretched as the upscaler of its time did."""
+def filter_call(module: ModuleType, stretch: int) -> Callable[[np.ndarray, tuple, object], np.ndarray]:
+    """``module``'s filter as ``call(estimate, weights, scratch)``; with ``stretch`` 2 clipped and stretched as the
+    upscaler of its time did (decided here, once, not inside the timed calls)."""
     if stretch == 1:
-        return module.filter_image(estimate, *weights, scratch=scratch)
+        return lambda estimate, weights, scratch: module.filter_image(estimate, *weights, scratch=scratch)
     if "stretch" in inspect.signature(module.filter_image).parameters:
-        return module.filter_image(estimate, *weights, scratch=scratch, clip_output=True, stretch=stretch,
-                                   stretch_a=STRETCH_CUBIC_A)
-    image = module.filter_image(estimate, *weights, scratch=scratch, clip_output=True)
-    return resize_bicubic(image, stretch * image.shape[1], stretch * image.shape[0], a=STRETCH_CUBIC_A,
-                          clamp=(0.0, 1.0))
+        return lambda estimate, weights, scratch: module.filter_image(
+            estimate, *weights, scratch=scratch, clip_output=True, stretch=stretch, stretch_a=STRETCH_CUBIC_A)
+
+    def filter_then_stretch(estimate: np.ndarray, weights: tuple, scratch) -> np.ndarray:
+        image = module.filter_image(estimate, *weights, scratch=scratch, clip_output=True)
+        return resize_bicubic(image, stretch * image.shape[1], stretch * image.shape[0], a=STRETCH_CUBIC_A,
+                              clamp=(0.0, 1.0))
+
+    return filter_then_stretch
 
 
 def main() -> None:
@@ -67,14 +73,15 @@ def main() -> None:
                 taau = TemporalUpsampler(scale)
                 estimates = [taau(*frame) for frame in lr_frames(caster, cameras, size, scale)][HISTORY_FRAMES:]
                 scratches = [m.Scratch() for m in modules]
+                calls = [filter_call(m, args.stretch) for m in modules]
                 times: list[list[float]] = [[] for _ in modules]
                 difference = 0.0
                 for _ in range(ROUNDS):
                     for estimate in estimates:
                         outputs = []
-                        for k, module in enumerate(modules):
+                        for k in range(len(modules)):
                             started = time.perf_counter()
-                            outputs.append(filtered(module, estimate, weights, scratches[k], args.stretch))
+                            outputs.append(calls[k](estimate, weights, scratches[k]))
                             times[k].append(1000.0 * (time.perf_counter() - started))
                         difference = max([difference] + [float(np.abs(o - outputs[0]).max()) for o in outputs[1:]])
                 stretched = f" + bicubic {args.stretch}x" if args.stretch > 1 else ""
