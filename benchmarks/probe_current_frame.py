@@ -31,7 +31,7 @@ from volsr_core.apps.bench.scenes import load_bench_volume
 from volsr_core.runtime.pipeline import Pipeline
 from volsr_core.scene.camera_paths import orbit_around
 from volsr_core.sr.history import HistoryFeed
-from volsr_core.temporal import render_supersampled
+from volsr_core.temporal.ground_truth import supersampled_truth
 
 RIDGE = 1e-6  # relative to the mean diagonal of the normal matrix, as volsr_core/sr/least_squares.py
 
@@ -56,14 +56,11 @@ def capture(spec: str, size: int, scale: int) -> tuple[list, list, list, list]:
         return parts
 
     feed.parts = both  # the feed's __call__ takes its estimate from here
-    images, truths = [], []
-    for t, camera in enumerate(tqdm(orbit_around(pipeline.caster.visible_bounds(), 12, 2.0),
-                                    desc=spec.split(".")[0], unit="frame")):
-        image = pipeline.render(camera)
-        if t >= WARMUP:
-            images.append(image)
-            truths.append(render_supersampled(pipeline.caster, camera, size, size, spp=16, seed=10**6 + t * 16))
-    return bases[WARMUP:], currents[WARMUP:], images, truths
+    cameras = orbit_around(pipeline.caster.visible_bounds(), 12, 2.0)
+    images = [pipeline.render(camera) for camera in tqdm(cameras, desc=spec.split(".")[0], unit="frame")]
+    truths = [supersampled_truth(pipeline.caster, camera, t, size, size) for t, camera in enumerate(cameras)
+              if t >= WARMUP]
+    return bases[WARMUP:], currents[WARMUP:], images[WARMUP:], truths
 
 
 def taps(image: np.ndarray, channel: int, kernel: int) -> np.ndarray:
