@@ -304,7 +304,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     failed = sum(s.error is not None for s in summaries)
     whole = f"{scale * k}x" + (f" ({scale}x + bicubic {k}x)" if k > 1 else "")
     how = f"within a {args.budget_ms:g} ms frame budget" if args.budget_ms is not None else whole
-    name = "-" if model is None else Path(str(model)).name + (" or stretched by the view (--stretch auto)"
+    name = "-" if model is None else Path(str(model)).name + (" or stretched by the view and its turn (--stretch auto)"
                                                               if chose_stretch else "")
     print(f"upscaled {len(summaries) - failed} of {len(summaries)} input(s) {how}"
           + (f" with {name}" if model is not None else "") + (f", {failed} failed" if failed else ""))
@@ -390,8 +390,9 @@ def add_upscale_parser(sub) -> None:
                     "--stretch 2 renders at 1/4 size and runs the 2x model to 1/2 size, as near the curve of "
                     "rendering fewer pixels as the 4x model or nearer where a voxel spans several output pixels "
                     "(1024² on the benchmark volumes; docs/performance.md, 'Where the history lives') [auto: 2 at an "
-                    "even --scale of 4 or more where a voxel of the view spans at least two output pixels, chosen per "
-                    "input at its first frame; 1 with --model, --variant auto or --budget-ms]")
+                    "even --scale of 4 or more where a voxel of the view spans at least two output pixels (judged at "
+                    "each new history) or while the view turns 3 degrees a frame or more (until under 2), else 1; 1 "
+                    "with --model, --variant auto or --budget-ms]")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                     help="where rays are cast and the network runs; on cuda an XS model's TAAU and filter run there "
                     "too and one image per frame comes back [cpu]")

@@ -85,8 +85,8 @@ MAX_STRETCH = 8  # the bicubic stretch after the model a command line may ask fo
 
 
 def parse_stretch(text: str) -> int | str:
-    """'auto' -> "auto" (chosen by the view: :class:`~volsr_core.runtime.pipeline.Pipeline`); an integer in
-    1..MAX_STRETCH -> itself."""
+    """'auto' -> "auto" (chosen by the view and how fast it turns: :class:`~volsr_core.runtime.pipeline.Pipeline`);
+    an integer in 1..MAX_STRETCH -> itself."""
     if text.strip().lower() == "auto":
         return "auto"
     try:

@@ -200,6 +200,7 @@ class InputSummary:
     psnr: dict[str, list[float]] = field(default_factory=dict)   # method -> dB per frame
     reference_spp: int = 0
     levels: dict[str, int] = field(default_factory=dict)  # frame-budget mode: frames made by each level
+    models: dict[str, int] = field(default_factory=dict)  # stretch "auto": frames made by each model it ran
     left_out: dict[str, str] = field(default_factory=dict)  # frame-budget mode: levels dropped, and why
     outputs: list[Path] = field(default_factory=list)
     error: str | None = None
@@ -219,6 +220,11 @@ class InputSummary:
         """Frame-budget mode's levels in the order first used, with their frames: "VolSR XS 2x 12, TAAU 2x 4"."""
         return ", ".join(f"{level} {count}" for level, count in self.levels.items())
 
+    def models_text(self) -> str:
+        """Stretch "auto"'s models in the order first used, with their frames: "volsr-XS-4x.onnx in 2 depth slabs 9,
+        volsr-XS-2x.onnx stretched 2x 15"."""
+        return ", ".join(f"{model} {count}" for model, count in self.models.items())
+
     def left_out_text(self) -> str:
         """Frame-budget mode's dropped levels: "VolSR S 2x (network 105 ms, more than ...)"."""
         return ", ".join(f"{level} ({why})" for level, why in self.left_out.items())
@@ -229,8 +235,9 @@ class InputSummary:
             return f"{self.name}: FAILED{done}: {self.error}"
         (w, h), (lw, lh) = self.size, self.low_resolution_size
         source = "" if self.levels else f" from {lw}x{lh}"  # frame-budget mode: the levels' sizes vary
-        source += f" in {self.slabs} depth slabs" if self.slabs else ""
-        source += f", the model's image stretched {self.stretch}x" if self.stretch > 1 else ""
+        if len(self.models) < 2:  # one model made every frame (several: stretch "auto" says per model below)
+            source += f" in {self.slabs} depth slabs" if self.slabs else ""
+            source += f", the model's image stretched {self.stretch}x" if self.stretch > 1 else ""
         text = (f"{self.name}: {self.frames} frames of {w}x{h}{source}; VolSR ms per frame (median): "
                 f"LR render {self.ms('render_ms'):.1f}, network {self.ms('network_ms'):.1f}, "
                 f"total {self.ms('total_ms'):.1f}")
@@ -242,6 +249,8 @@ class InputSummary:
             text += ": " + " | ".join(self.method_line(m) for m in self.method_ms)
         if self.levels:
             text += f"; frames per level: {self.levels_text()}"
+        if len(self.models) > 1:
+            text += f"; frames per model (--stretch auto): {self.models_text()}"
         if self.left_out:
             text += f"; left out: {self.left_out_text()}"
         if self.outputs:
@@ -275,7 +284,20 @@ def summary_markdown(summaries: Sequence[InputSummary], scale: str, model: str, 
                   "still camera):"]
         lines += [f"- {s.name}: {s.levels_text()}" + (f"; left out: {s.left_out_text()}" if s.left_out else "")
                   for s in summaries if s.levels]
+    if any(len(s.models) > 1 for s in summaries):
+        lines += ["", "Frames per model (`--stretch auto`: the half-size model stretched where the view samples the "
+                  "volume finely or turns fast):"]
+        lines += [f"- {s.name}: {s.models_text()}" for s in summaries if len(s.models) > 1]
     return "\n".join(lines) + "\n"
+
+
+def model_label(pipeline) -> str:
+    """The model a pipeline ran for its last frame, as the summary names it: "volsr-XS-4x.onnx in 2 depth slabs",
+    "volsr-XS-2x.onnx stretched 2x"."""
+    path = getattr(pipeline.engine, "path", None)
+    text = path.name if path is not None else f"the {pipeline.model_scale}x model"
+    text += f" in {pipeline.slabs} depth slabs" if pipeline.slabs else ""
+    return text + (f" stretched {pipeline.stretch}x" if pipeline.stretch > 1 else "")
 
 
 FRAME_NAME = re.compile(r"frame_\d{4,}\.png")
@@ -364,6 +386,9 @@ def upscale_cameras(pipeline, cameras: Sequence, out_dir: str | os.PathLike, *, 
             summary.frames = i + 1
             summary.slabs = getattr(pipeline, "slabs", 0)  # the last frame's ("auto" stretch chooses its model)
             summary.stretch = getattr(pipeline, "stretch", 1)
+            if getattr(pipeline, "auto_stretch", False):
+                model = model_label(pipeline)
+                summary.models[model] = summary.models.get(model, 0) + 1
             bar.update(1)
             if on_frame is not None:
                 on_frame(i)

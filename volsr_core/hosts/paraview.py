@@ -262,7 +262,7 @@ class ViewUpscaler:
       (:func:`volume_of`);
     - ``model``, ``scale``, ``variant``, ``device``, ``threads``, ``sample_distance``, ``slabs``, ``stretch``: as
       :class:`~volsr_core.runtime.pipeline.Pipeline` takes them (None model: the shipped one; None slabs:
-      the model's own; "auto" stretch, the default: by the view);
+      the model's own; "auto" stretch, the default: by the view and how fast it turns);
     - the output size is the view's size, the background the view's background colour.
 
     :meth:`render` returns float32 (H, W, 3) in [0, 1] and keeps ``last_camera``,

@@ -225,7 +225,7 @@ class SlicerSession:
             return "waiting for the first frame"
         (w, h), (lw, lh) = adapter.pipeline.size, adapter.pipeline.low_resolution_size
         fps = 1000.0 / t["total_ms"] if t["total_ms"] > 0 else float("inf")
-        stretch = adapter.pipeline.stretch  # "auto": 2 where a voxel of the view spans two pixels or more
+        stretch = adapter.pipeline.stretch  # "auto": 2 where a voxel spans two pixels or more, or the view turns fast
         network = (f"{self.variant} {self.scale}x" if stretch == 1
                    else f"{self.variant} {self.scale // stretch}x + bicubic {stretch}x")
         return (f"{t['total_ms']:.1f} ms/frame ({fps:.1f} fps): ray cast {lw}x{lh} {t['render_ms']:.1f} ms + "

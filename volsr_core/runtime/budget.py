@@ -142,8 +142,8 @@ class BudgetRenderer(KeepsLastFrame):
       shipped models, less the TAAU levels whose scale does not divide ``size``); ``model_files`` maps
       a model level to its model file (default: the shipped one, which at an even scale of 4 or more follows the view
       as in the hosts, ``Pipeline(stretch="auto")``: the model of half the scale at half the size, stretched
-      bicubically, where a voxel spans two output pixels or more; the frame's ``state.level`` then names it, e.g.
-      'VolSR XS 2x + bicubic 2x'). The model levels :func:`unpaid` finds
+      bicubically, where a voxel spans two output pixels or more or the view turns fast; the frame's ``state.level``
+      then names it, e.g. 'VolSR XS 2x + bicubic 2x'). The model levels :func:`unpaid` finds
       when the levels are timed are then dropped from ``choices``; ``left_out`` says why;
     - ``smoothing``: weight of a new measurement in a level's running ms estimate;
     - ``finer_margin``: a finer level is taken only when its estimate is below this fraction of the
@@ -188,7 +188,8 @@ class BudgetRenderer(KeepsLastFrame):
                 self.pipelines[level] = MethodLevel(Taau(self.caster, self.size, level.scale))
             elif level.scale > 1:
                 # a shipped model follows the view as the hosts' does (stretch "auto": at 4x the 2x model at half
-                # the size, stretched, where a voxel spans two output pixels or more); a given file runs as it is
+                # the size, stretched, where a voxel spans two output pixels or more or the view turns fast); a given
+                # file runs as it is
                 model = files.get(level)
                 self.pipelines[level] = Pipeline(volume, transfer_function, model, scale=level.scale, size=self.size,
                                                  variant=level.variant, device=device, threads=threads,

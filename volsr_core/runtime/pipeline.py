@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 import time
+from collections import deque
 from typing import Any, Sequence
 
 import numpy as np
@@ -22,8 +24,11 @@ from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
+from volsr_core.temporal.taau import view_rotation
 
 STRETCH_FROM = 2.0  # stretch "auto": by 2 where a voxel spans at least this many output pixels (docs/performance.md)
+FAST_TURN = (2.0, 3.0)  # stretch "auto" below STRETCH_FROM: by 2 from 3° a frame, back below 2° (docs/performance.md)
+TURN_FRAMES = 3  # ... the view's turn per frame taken as the median of the last this many frames
 
 
 class KeepsLastFrame:
@@ -52,9 +57,13 @@ class Pipeline(KeepsLastFrame):
       time), so that its history and filter work on k² times fewer pixels: where a voxel spans several output pixels,
       detail the frames' samples do not hold anyway (docs/performance.md, "Where the history lives"); "auto": at an
       even ``scale`` of 4 or more with a shipped model (``model`` None) at half of it, 2 where the view's voxels span
-      at least :data:`STRETCH_FROM` output pixels (``RayCaster.pixels_per_voxel`` at ``size``), else 1, chosen at each
-      new history (the first frame, a :meth:`reset` or :meth:`update` that changed something), both models opened up
-      front; otherwise 1;
+      at least :data:`STRETCH_FROM` output pixels (``RayCaster.pixels_per_voxel`` at ``size``, judged at each new
+      history: the first frame, a :meth:`reset` or :meth:`update` that changed something, a turn beyond
+      ``max_turn``) or while the view turns fast: from :data:`FAST_TURN` [1] degrees a frame (the median of the last
+      :data:`TURN_FRAMES` frames' :func:`~volsr_core.temporal.taau.view_rotation`) until it turns less than
+      :data:`FAST_TURN` [0], where the full-size model's history goes stale sooner than the stretched one's
+      (docs/performance.md, "How fast the view turns"); else 1; both models opened up front, each change of model
+      starting its history afresh; otherwise 1;
     - ``variant``: None: :func:`~volsr_core.runtime.models.default_variant`, the fastest shipped at
       ``scale`` (XS at 2x: the model that pays off on a CPU, docs/performance.md);
     - ``size``: output (width, height) in pixels; any size: the LR frame is ceil(size / scale)
@@ -96,6 +105,9 @@ class Pipeline(KeepsLastFrame):
             self._paths[k] = (engine, StatefulUpscaler(engine, max_turn=max_turn, max_zoom=max_zoom, slabs=slabs,
                                                        device=device, stretch=k))
         self.auto_stretch = len(self._paths) > 1
+        self.max_turn = float(max_turn)  # a turn beyond it is a cut: stretch "auto" starts its choice afresh too
+        self._fine = self._fast = False  # stretch "auto": the view samples the volume finely; it turns fast
+        self._turns: deque[float] = deque(maxlen=TURN_FRAMES)  # ... the last frames' turns, degrees
         self._use(min(self._paths))
         self.size = (int(size[0]), int(size[1]))
         self._tf_key = _tf_key(transfer_function)
@@ -112,6 +124,21 @@ class Pipeline(KeepsLastFrame):
         self.model_scale = int(self.engine.config.scale)
         self.scale = self.model_scale * stretch
         self.slabs = self.upscaler.slabs
+
+    def _auto_stretch(self, camera: Camera) -> int:
+        """Stretch "auto"'s choice for the frame of ``camera``: 2 where the view samples the volume finely (judged when
+        a history starts, or at a turn beyond ``max_turn``: a cut) or turns fast (with hysteresis, over the last
+        frames' turns), else 1."""
+        turn = view_rotation(camera, self.previous_camera)
+        if self.previous_camera is None or turn > self.max_turn:  # a new history, or a cut (a jump, not a turn)
+            self._fine = self.caster.pixels_per_voxel(camera, self.size[1]) >= STRETCH_FROM
+            self._turns.clear()
+            self._fast = False
+        else:
+            self._turns.append(turn)
+            turn = statistics.median(self._turns)
+            self._fast = turn >= FAST_TURN[1] or (self._fast and turn >= FAST_TURN[0])
+        return 2 if self._fine or self._fast else 1
 
     @property
     def low_resolution_size(self) -> tuple[int, int]:
@@ -162,8 +189,8 @@ class Pipeline(KeepsLastFrame):
 
     def render(self, camera: Camera) -> np.ndarray:
         """The upscaled image for ``camera``: float32 (H, W, 3) in [0, 1], H, W = ``size``."""
-        if self.auto_stretch and self.previous_camera is None:  # a new history: its stretch by this view
-            self._use(2 if self.caster.pixels_per_voxel(camera, self.size[1]) >= STRETCH_FROM else 1)
+        if self.auto_stretch:
+            self._use(self._auto_stretch(camera))
         w, h = self.low_resolution_size
         jitter = halton_jitter(self.frame, jitter_phases(self.model_scale))
         started = time.perf_counter()
