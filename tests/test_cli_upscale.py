@@ -157,6 +157,9 @@ def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "upscaled 1 of 1 input(s) 2x with volsr-XS-2x.onnx" in out and "from 16x16" in out
     assert main(["upscale", "--orbit", "1", "--size", "32", "--scale", "8", "--out", str(tmp_path / "b")]) == 0
+    assert "8x (4x + bicubic 2x) with volsr-XS-4x.onnx" in capsys.readouterr().out  # the 8x U-Net only when named
+    assert main(["upscale", "--orbit", "1", "--size", "32", "--scale", "8", "--variant", "S",
+                 "--out", str(tmp_path / "b")]) == 0
     assert "8x with volsr-S-8x.onnx" in capsys.readouterr().out
     assert main(["upscale", "--orbit", "2", "--size", "32", "--scale", "4", "--out", str(tmp_path / "c")]) == 0
     assert "4x with volsr-XS-4x.onnx" in (out := capsys.readouterr().out) and "from 8x8 in 2 depth slabs" in out

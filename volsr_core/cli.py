@@ -205,7 +205,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     from volsr_core.render import RayCaster
     from volsr_core.runtime.engines import open_engine
     from volsr_core.runtime.models import model_file
-    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.runtime.pipeline import Pipeline, auto_stretches
     from volsr_core.runtime.upscaler import takes_slabs
     from volsr_core.scene.camera_paths import read_camera_path
     from volsr_core.scene.presets import choose_transfer_function, get_preset, load_transfer_function
@@ -232,6 +232,8 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     model, variant, stretch = None, args.variant, args.stretch
     if stretch == "auto" and (args.model or args.budget_ms is not None or variant == "auto"):
         stretch = 1  # a model file upscales by its own scale; the frame budget and --variant auto choose their own
+    elif stretch == "auto" and auto_stretches(args.scale, variant) == (2,):
+        stretch = 2  # nothing to choose: the half-size model, stretched (8x: XS 4x + bicubic 2x)
     k = 1 if stretch == "auto" else stretch  # the stretch the model is checked for ("auto": the unstretched one)
     if args.scale is not None and args.scale % k:
         raise InputError("--stretch", f"{k} does not divide --scale {args.scale}")
@@ -391,8 +393,8 @@ def add_upscale_parser(sub) -> None:
                     "rendering fewer pixels as the 4x model or nearer where a voxel spans several output pixels "
                     "(1024² on the benchmark volumes; docs/performance.md, 'Where the history lives') [auto: 2 at an "
                     "even --scale of 4 or more where a voxel of the view spans at least two output pixels (judged at "
-                    "each new history) or while the view turns 3 degrees a frame or more (until under 2), else 1; 1 "
-                    "with --model, --variant auto or --budget-ms]")
+                    "each new history) or while the view turns 3 degrees a frame or more (until under 2), else 1; 2 "
+                    "at --scale 8 without --variant (XS 4x stretched); 1 with --model, --variant auto or --budget-ms]")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                     help="where rays are cast and the network runs; on cuda an XS model's TAAU and filter run there "
                     "too and one image per frame comes back [cpu]")

@@ -208,17 +208,28 @@ class Pipeline(KeepsLastFrame):
         return image[: self.size[1], : self.size[0]]
 
 
-def _stretches(stretch: int | str, scale: int | None, model: Any, variant: str | None) -> tuple[int, ...]:
-    """The stretches a pipeline may run: ``stretch`` itself, or for "auto" 1 and, where ``scale`` is even and 4 or
-    more and a shipped model of the variant upscales half of it, 2."""
-    if stretch == "auto":
-        if model is not None or scale is None or scale < 4 or scale % 2:
-            return (1,)
-        from volsr_core.runtime.models import default_variant, shipped_models
+def auto_stretches(scale: int | None, variant: str | None) -> tuple[int, ...]:
+    """The stretches ``stretch="auto"`` chooses between for the shipped models at ``scale`` (None: the default scale)
+    and ``variant`` (None: the default): 1 and, where ``scale`` is even and 4 or more and a shipped model of the variant
+    upscales half of it, 2; only 2 where no variant is named and none of the half's default variant ships at ``scale``
+    (8x: the half's XS 4x, stretched, where the one 8x model is a U-Net, 3-4.7 times as slow at every point measured
+    and below it in PSNR at 15 of 16: docs/performance.md, "How fast the view turns")."""
+    if scale is None or scale < 4 or scale % 2:
+        return (1,)
+    from volsr_core.runtime.models import default_variant, shipped_models
 
-        half = scale // 2
-        wanted = (variant or default_variant(half)).upper()
-        return (1, 2) if any(e["variant"] == wanted and e["scale"] == half for e in shipped_models()) else (1,)
+    half = scale // 2
+    wanted = (variant or default_variant(half)).upper()
+    if not any(e["variant"] == wanted and e["scale"] == half for e in shipped_models()):
+        return (1,)
+    return (2,) if variant is None and default_variant(scale) != wanted else (1, 2)
+
+
+def _stretches(stretch: int | str, scale: int | None, model: Any, variant: str | None) -> tuple[int, ...]:
+    """The stretches a pipeline may run: ``stretch`` itself, or for "auto" :func:`auto_stretches` (1 for a given
+    model)."""
+    if stretch == "auto":
+        return (1,) if model is not None else auto_stretches(scale, variant)
     if not isinstance(stretch, int) or stretch < 1 or (scale is not None and scale % stretch):
         raise ValueError(f"the stretch must be 'auto' or a whole number >= 1 that divides the scale, got {stretch!r}"
                          + ("" if scale is None else f" for {scale}x"))
