@@ -330,8 +330,9 @@ def test_stretch_auto_picks_by_the_views_pixels_per_voxel_at_each_new_history():
     assert not Pipeline(volume, tf, scale=2, stretch="auto", variant="XS").auto_stretch
     assert not Pipeline(volume, tf, pipeline.engine.path, scale=4, stretch="auto").auto_stretch  # a file: its own
     # at 8x, where the one 8x model is a U-Net, "auto" runs XS 4x stretched unless a variant is named
-    eight = Pipeline(volume, tf, scale=8, stretch="auto", size=(64, 64))
-    assert (eight.auto_stretch, eight.stretch, eight.engine.path.name) == (False, 2, "volsr-XS-4x.onnx")
+    for variant in (None, "XS"):  # XS named at 8x, where it has no model: the same
+        eight = Pipeline(volume, tf, scale=8, stretch="auto", variant=variant, size=(64, 64))
+        assert (eight.auto_stretch, eight.stretch, eight.engine.path.name) == (False, 2, "volsr-XS-4x.onnx")
     assert Pipeline(volume, tf, scale=8, stretch="auto", variant="S", size=(64, 64)).auto_stretch
     with pytest.raises(ValueError, match="'auto' or a whole number"):
         Pipeline(volume, tf, scale=4, stretch="twice")

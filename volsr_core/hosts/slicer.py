@@ -169,8 +169,8 @@ class SlicerSession:
                                         layer=layer, device=device, backend=backend, threads=threads,
                                         sample_distance=sample_distance, enabled=enabled, world_matrix=RAS_TO_LPS)
         self.scale = self.adapter.pipeline.scale
-        self.variant = str(variant).upper() if variant is not None else (
-            default_variant(self.scale) if model is None else "custom")
+        self.variant = str(variant).upper() if variant is not None else (  # the shipped model's, at the scale it runs
+            default_variant(self.adapter.pipeline.model_scale) if model is None else "custom")
 
     @property
     def enabled(self) -> bool:

@@ -210,19 +210,22 @@ class Pipeline(KeepsLastFrame):
 
 def auto_stretches(scale: int | None, variant: str | None) -> tuple[int, ...]:
     """The stretches ``stretch="auto"`` chooses between for the shipped models at ``scale`` (None: the default scale)
-    and ``variant`` (None: the default): 1 and, where ``scale`` is even and 4 or more and a shipped model of the variant
-    upscales half of it, 2; only 2 where no variant is named and none of the half's default variant ships at ``scale``
-    (8x: the half's XS 4x, stretched, where the one 8x model is a U-Net, 3-4.7 times as slow at every point measured
-    and below it in PSNR at 15 of 16: docs/performance.md, "How fast the view turns")."""
+    and ``variant`` (None: the default at each scale): 1 and, where ``scale`` is even and 4 or more and a shipped model
+    of the variant upscales half of it, 2; only 2 where the whole scale has no model of that variant (a named XS at
+    8x), or where no variant is named and the whole scale's default is another (8x: the one 8x model is a U-Net, 3-4.7
+    times as slow as XS 4x stretched at every point measured and below it in PSNR at 15 of 16:
+    docs/performance.md, "How fast the view turns")."""
     if scale is None or scale < 4 or scale % 2:
         return (1,)
     from volsr_core.runtime.models import default_variant, shipped_models
 
     half = scale // 2
     wanted = (variant or default_variant(half)).upper()
-    if not any(e["variant"] == wanted and e["scale"] == half for e in shipped_models()):
+    shipped = {(e["variant"], e["scale"]) for e in shipped_models()}
+    if (wanted, half) not in shipped:
         return (1,)
-    return (2,) if variant is None and default_variant(scale) != wanted else (1, 2)
+    whole = (variant or default_variant(scale)).upper()
+    return (1, 2) if whole == wanted and (wanted, scale) in shipped else (2,)
 
 
 def _stretches(stretch: int | str, scale: int | None, model: Any, variant: str | None) -> tuple[int, ...]:
