@@ -176,8 +176,9 @@ def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "4x with volsr-XS-4x.onnx or stretched by the view and its turn (--stretch auto)" in out
     assert "from 128x128, the model's image stretched 2x;" in out
-    # ... and while the view turns fast (5° a frame), the first frame XS 4x's and the rest the stretched model's
-    assert main(["upscale", "--orbit", "4", "--degrees", "5", "--size", "64", "--scale", "4",
+    # ... and while the view turns fast for its sampling (15° a frame, 0.36 pixels per voxel at 64²), the first frame
+    # XS 4x's and the rest the stretched model's
+    assert main(["upscale", "--orbit", "4", "--degrees", "15", "--size", "64", "--scale", "4",
                  "--out", str(tmp_path / "g")]) == 0
     out = capsys.readouterr().out
     models = "volsr-XS-4x.onnx in 2 depth slabs 1, volsr-XS-2x.onnx stretched 2x 3"

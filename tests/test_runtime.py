@@ -340,8 +340,9 @@ def test_stretch_auto_picks_by_the_views_pixels_per_voxel_at_each_new_history():
 
 def test_stretch_auto_follows_how_fast_the_view_turns_with_hysteresis():
     """Where the view samples coarsely, ``stretch="auto"`` runs XS 4x while the view turns slowly and XS 2x stretched
-    once the median of the last three frames' turns reaches 3° a frame, back below 2°: in between it keeps what it
-    runs, and each change starts the other model's history afresh (docs/performance.md, "How fast the view turns")."""
+    once the median of the last three frames' turns times the view's pixels per voxel reaches 3.5, back below 2.5: in
+    between it keeps what it runs, and each change starts the other model's history afresh (docs/performance.md,
+    "How fast the view turns")."""
     from volsr_core.io import make_phantom
     from volsr_core.runtime.pipeline import FAST_TURN, STRETCH_FROM, TURN_FRAMES, Pipeline
     from volsr_core.scene import Volume, get_preset
@@ -349,18 +350,19 @@ def test_stretch_auto_follows_how_fast_the_view_turns_with_hysteresis():
     volume = Volume.from_record(make_phantom(shape=(40, 40, 40)))
     pipeline = Pipeline(volume, get_preset("CT-Phantom"), scale=4, stretch="auto", variant="XS", size=(64, 64))
     camera = Camera.framing(volume.bounds)
-    assert pipeline.caster.pixels_per_voxel(camera, 64) < STRETCH_FROM and FAST_TURN == (2.0, 3.0) and TURN_FRAMES == 3
-    turns = [0, 1, 1, 5, 5, 5, 2.5, 2.5, 2.5, 1, 1, 4]  # degrees a frame (the first: a new history)
+    per_voxel = pipeline.caster.pixels_per_voxel(camera, 64)  # the same while the camera orbits its focal point
+    assert per_voxel < STRETCH_FROM and FAST_TURN == (2.5, 3.5) and TURN_FRAMES == 3
+    moves = [0, 1, 1, 6, 6, 6, 3, 3, 3, 1, 1, 5]  # degrees a frame times pixels per voxel (the first: new)
     stretches, reasons = [], []
-    for degrees in turns:
-        camera = camera.azimuth(degrees)
+    for move in moves:
+        camera = camera.azimuth(move / per_voxel)
         image = pipeline.render(camera)
         stretches.append(pipeline.stretch)
         reasons.append(pipeline.last_reset_reason)
         assert image.shape == (64, 64, 3) and pipeline.low_resolution_size == (16, 16)
-    # from the second frame on, medians of the last three turns: 1, 1, 1, 5, 5, 5, 2.5, 2.5, 2.5, 1, 1
+    # from the second frame on, medians of the last three: 1, 1, 1, 6, 6, 6, 3, 3, 3, 1, 1
     assert stretches == [1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 1, 1]
     assert reasons[4] == "stretch changed" and pipeline.slabs == 2
     pipeline.reset()
-    pipeline.render(camera.azimuth(5.0))
+    pipeline.render(camera.azimuth(6.0 / per_voxel))
     assert pipeline.stretch == 1, "a new history starts with no turns measured"

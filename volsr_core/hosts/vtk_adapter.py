@@ -54,7 +54,7 @@ class VolSRPostProcess:
       that pays off on a CPU; a model file upscales by its own scale; None slabs: the model's own, two
       depth slabs for XS at 4x and more; ``stretch`` 2 at ``scale`` 4: the 2x model to half the viewport, stretched
       bicubically; "auto", the default: so where a voxel spans two or more viewport pixels (judged at each new
-      history) or while the view turns 3° a frame or more);
+      history) or while the view turns fast for its sampling);
     - ``layer``: the window layer of the overlay renderer (default: the host renderer's + 1;
       3D Slicer wants 3); the window gets enough layers;
     - ``reset_angle`` (degrees), ``reset_zoom``: a camera that turned further than this between two

@@ -27,8 +27,10 @@ from volsr_core.temporal.jitter import halton_jitter, jitter_phases
 from volsr_core.temporal.taau import view_rotation
 
 STRETCH_FROM = 2.0  # stretch "auto": by 2 where a voxel spans at least this many output pixels (docs/performance.md)
-FAST_TURN = (2.0, 3.0)  # stretch "auto" below STRETCH_FROM: by 2 from 3° a frame, back below 2° (docs/performance.md)
-TURN_FRAMES = 3  # ... the view's turn per frame taken as the median of the last this many frames
+# stretch "auto" below STRETCH_FROM: by 2 while the view turns fast, from 3.5 degrees a frame times the view's output
+# pixels per voxel (from about 2.3° at 512² on the bench's volumes, 4.7° at 256²), back below 2.5 (docs/performance.md)
+FAST_TURN = (2.5, 3.5)
+TURN_FRAMES = 3  # ... taken as the median of the last this many frames
 
 
 class KeepsLastFrame:
@@ -59,11 +61,12 @@ class Pipeline(KeepsLastFrame):
       even ``scale`` of 4 or more with a shipped model (``model`` None) at half of it, 2 where the view's voxels span
       at least :data:`STRETCH_FROM` output pixels (``RayCaster.pixels_per_voxel`` at ``size``, judged at each new
       history: the first frame, a :meth:`reset` or :meth:`update` that changed something, a turn beyond
-      ``max_turn``) or while the view turns fast: from :data:`FAST_TURN` [1] degrees a frame (the median of the last
-      :data:`TURN_FRAMES` frames' :func:`~volsr_core.temporal.taau.view_rotation`) until it turns less than
-      :data:`FAST_TURN` [0], where the full-size model's history goes stale sooner than the stretched one's
-      (docs/performance.md, "How fast the view turns"); else 1; both models opened up front, each change of model
-      starting its history afresh; otherwise 1;
+      ``max_turn``) or while the view turns fast: from :data:`FAST_TURN` [1] degrees a frame times the view's output
+      pixels per voxel (the median over the last :data:`TURN_FRAMES` frames of
+      :func:`~volsr_core.temporal.taau.view_rotation` times it: about how far the volume moves in pixels) until that
+      falls below :data:`FAST_TURN` [0], where the full-size model's history goes stale sooner than the stretched
+      one's (docs/performance.md, "How fast the view turns"); else 1; both models opened up front, each change of
+      model starting its history afresh; otherwise 1;
     - ``variant``: None: :func:`~volsr_core.runtime.models.default_variant`, the fastest shipped at
       ``scale`` (XS at 2x: the model that pays off on a CPU, docs/performance.md);
     - ``size``: output (width, height) in pixels; any size: the LR frame is ceil(size / scale)
@@ -107,7 +110,7 @@ class Pipeline(KeepsLastFrame):
         self.auto_stretch = len(self._paths) > 1
         self.max_turn = float(max_turn)  # a turn beyond it is a cut: stretch "auto" starts its choice afresh too
         self._fine = self._fast = False  # stretch "auto": the view samples the volume finely; it turns fast
-        self._turns: deque[float] = deque(maxlen=TURN_FRAMES)  # ... the last frames' turns, degrees
+        self._turns: deque[float] = deque(maxlen=TURN_FRAMES)  # ... the last frames' turns times pixels per voxel
         self._use(min(self._paths))
         self.size = (int(size[0]), int(size[1]))
         self._tf_key = _tf_key(transfer_function)
@@ -127,17 +130,18 @@ class Pipeline(KeepsLastFrame):
 
     def _auto_stretch(self, camera: Camera) -> int:
         """Stretch "auto"'s choice for the frame of ``camera``: 2 where the view samples the volume finely (judged when
-        a history starts, or at a turn beyond ``max_turn``: a cut) or turns fast (with hysteresis, over the last
-        frames' turns), else 1."""
+        a history starts, or at a turn beyond ``max_turn``: a cut) or turns fast for its sampling (with hysteresis,
+        over the last frames' turns times their pixels per voxel), else 1."""
         turn = view_rotation(camera, self.previous_camera)
+        pixels_per_voxel = self.caster.pixels_per_voxel(camera, self.size[1])
         if self.previous_camera is None or turn > self.max_turn:  # a new history, or a cut (a jump, not a turn)
-            self._fine = self.caster.pixels_per_voxel(camera, self.size[1]) >= STRETCH_FROM
+            self._fine = pixels_per_voxel >= STRETCH_FROM
             self._turns.clear()
             self._fast = False
         else:
-            self._turns.append(turn)
-            turn = statistics.median(self._turns)
-            self._fast = turn >= FAST_TURN[1] or (self._fast and turn >= FAST_TURN[0])
+            self._turns.append(turn * pixels_per_voxel)
+            motion = statistics.median(self._turns)
+            self._fast = motion >= FAST_TURN[1] or (self._fast and motion >= FAST_TURN[0])
         return 2 if self._fine or self._fast else 1
 
     @property
@@ -212,8 +216,8 @@ def auto_stretches(scale: int | None, variant: str | None) -> tuple[int, ...]:
     """The stretches ``stretch="auto"`` chooses between for the shipped models at ``scale`` (None: the default scale)
     and ``variant`` (None: the default at each scale): 1 and, where ``scale`` is even and 4 or more and a shipped model
     of the variant upscales half of it, 2; only 2 where the whole scale has no model of that variant (a named XS at
-    8x), or where no variant is named and the whole scale's default is another (8x: the one 8x model is a U-Net, 3-4.7
-    times as slow as XS 4x stretched at every point measured and below it in PSNR at 15 of 16:
+    8x), or where no variant is named and the whole scale's default is another (8x: the one 8x model is a U-Net,
+    2.7-4.6 times as slow as XS 4x stretched at every point measured and below it in PSNR at 15 of 16:
     docs/performance.md, "How fast the view turns")."""
     if scale is None or scale < 4 or scale % 2:
         return (1,)
