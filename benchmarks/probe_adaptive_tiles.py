@@ -1,6 +1,6 @@
 """Would rendering finer only where the picture needs it pay? A bound from the bench's own frames.
 
-    python benchmarks/probe_adaptive_tiles.py [--size 512] [--tile 16]   # ~4 min at 512², 2 cores
+    python benchmarks/probe_adaptive_tiles.py [--size 512] [--tile 16]   # about a minute at 512², 2 cores
 
 Every method of the bench renders its frame at one size. A renderer could instead cast the 1/4-size frame everywhere
 and the 1/2-size rays only in the tiles where the 1/4-size picture falls short. On the bench's orbit (12 frames of
