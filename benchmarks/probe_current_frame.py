@@ -1,6 +1,6 @@
 """What the current LR frame could add to XS's filter beside its base: an upper bound before building it.
 
-    python benchmarks/probe_current_frame.py [--size 512] [--scale 4]   # ~3 min at 512², 2 cores
+    python benchmarks/probe_current_frame.py [--size 512] [--scale 4]   # about a minute at 512², 5 at 1024²; 2 cores
 
 XS filters only its base, TAAU's estimate (at 4x and more the layered TAAU's), where the history and the current
 frame are already blended. Issue 12 asks for a network that also sees what TAAU throws away. On the bench's orbit
