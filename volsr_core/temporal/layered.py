@@ -85,16 +85,32 @@ def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, box, dst):
 
 
 @numba.njit(**_INNER)
-def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
-         out, new_history, shown, acc):
+def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
+         out, new_history, shown, spans, acc):
     n_slabs, hr_h, hr_w = new_history.shape[0], new_history.shape[1], new_history.shape[2]
-    lr_h, lr_w = slabs.shape[1], slabs.shape[2]
+    lr_h = slabs.shape[1]
     ly, y0, y1, dy0, wy0, wy1 = _row_window(y, scale, jy, lr_h, inv2s2)
-    acc[:] = 0.0  # the row's composite so far: premultiplied RGB and alpha
+    # the HR columns where some slab shows something (``content``: per slab and LR row, the first and last LR
+    # column that does); the rest of the row is the background
+    drawn_lo, drawn_hi = hr_w, 0
     for k in range(n_slabs):
+        if content[k, ly, 1] >= content[k, ly, 0]:
+            drawn_lo = min(drawn_lo, runs[content[k, ly, 0]])
+            drawn_hi = max(drawn_hi, runs[content[k, ly, 1] + 1])
+    for x in range(drawn_lo, drawn_hi):
+        for c in range(4):
+            acc[x, c] = 0.0  # the composite so far: premultiplied RGB and alpha
+    for k in range(n_slabs):
+        # the LR columns to visit: those where the slab shows something and those whose HR pixels the buffer may
+        # still hold something other than zeros in (``spans``: per slab and HR row, as the buffer was last written)
+        first, last = content[k, ly, 0], content[k, ly, 1]
+        if spans[k, y, 1] > spans[k, y, 0]:
+            first = min(first, int(cols[spans[k, y, 0], 0]))
+            last = max(last, int(cols[spans[k, y, 1] - 1, 0]))
+        new_lo, new_hi = hr_w, 0
         # the HR pixels whose nearest LR sample is lx (columns runs[lx] .. runs[lx + 1] - 1) share its slab's
         # motion and box, so the history's rows and their weights are found once per run
-        for lx in range(lr_w):
+        for lx in range(first, last + 1):
             if info[k, ly, lx, 10] == 0.0:  # the slab shows nothing around here: an empty history
                 for x in range(runs[lx], runs[lx + 1]):
                     if shown[k, y, x]:  # else the buffer holds zeros there already
@@ -102,6 +118,7 @@ def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, te
                             new_history[k, y, x, c] = 0.0
                         shown[k, y, x] = 0
                 continue
+            new_lo, new_hi = min(new_lo, runs[lx]), max(new_hi, runs[lx + 1])
             mx = scale * info[k, ly, lx, 8]
             sy = y + scale * info[k, ly, lx, 9]
             rows_in = has_history and -0.5 < sy < hr_h - 0.5
@@ -137,10 +154,15 @@ def _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, te
                     acc[x, c] += behind * o
                 new_history[k, y, x, 4] = min(n + a, cap)
                 shown[k, y, x] = 1
+        spans[k, y, 0], spans[k, y, 1] = (new_lo, new_hi) if new_hi > new_lo else (0, 0)
     for x in range(hr_w):
-        behind = 1.0 - acc[x, 3]
-        for c in range(3):
-            out[y, x, c] = acc[x, c] + behind * background[c]
+        if drawn_lo <= x < drawn_hi:
+            behind = 1.0 - acc[x, 3]
+            for c in range(3):
+                out[y, x, c] = acc[x, c] + behind * background[c]
+        else:
+            for c in range(3):
+                out[y, x, c] = background[c]
 
 
 def _prepass_kernel(sources: str):
@@ -176,12 +198,21 @@ def _row_kernel(sources: str):
 
     @numba.njit(parallel=True, **_NB)
     def kernel(history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background, out,
-                new_history, shown):
+               new_history, shown, spans):
         sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
+        n_slabs, lr_h, lr_w = info.shape[0], info.shape[1], info.shape[2]
+        content = np.empty((n_slabs, lr_h, 2), dtype=np.int64)  # per slab and LR row: first and last column shown
+        for j in numba.prange(lr_h):
+            for k in range(n_slabs):
+                content[k, j, 0], content[k, j, 1] = lr_w, -1
+                for i in range(lr_w):
+                    if info[k, j, i, 10] != 0.0:
+                        content[k, j, 0] = min(content[k, j, 0], i)
+                        content[k, j, 1] = i
         for y in numba.prange(out.shape[0]):
             acc = np.empty((out.shape[1], 4), dtype=np.float32)
-            _row(y, history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
-                 out, new_history, shown, acc)
+            _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, inv2s2, tent, cap, rectify,
+                 background, out, new_history, shown, spans, acc)
 
     return kernel
 
@@ -212,10 +243,11 @@ class LayeredUpsampler(TemporalUpsampler):
         self.clamp_rotating = clamp_rotating
         self._info: np.ndarray | None = None  # the prepass's results, and its work buffer
         self._across: np.ndarray | None = None
-        # per history buffer (K, H, W) uint8: 1 where it may hold something other than zeros (a slab's pixels shown
-        # there), so a pixel that stays empty is not written again
-        self._history_shown: np.ndarray | None = None
-        self._spare_shown: np.ndarray | None = None
+        # per history buffer, where it may hold something other than zeros (a slab's pixels shown there): (K, H, W)
+        # uint8, 1 there, and (K, H, 2) int64, per slab and row the span of columns they lie in; so a pixel that stays
+        # empty is not written again, and a row's columns outside the span and the slab's LR content are not visited
+        self._history_shown: tuple[np.ndarray, np.ndarray] | None = None
+        self._spare_shown: tuple[np.ndarray, np.ndarray] | None = None
 
     def _rectifies(self, static: bool, still: bool, pixels_per_voxel: float | None) -> bool:
         """Whether this frame clamps the history (step 4 of the module docstring): under a pan or a zoom, and while the
@@ -257,12 +289,13 @@ class LayeredUpsampler(TemporalUpsampler):
             self._across = np.empty_like(self._info)
         _prepass(slabs, rectify, self._across, self._info)
         if self._spare is not None and self._spare.shape == shape:
-            new_history, shown = self._spare, self._spare_shown
+            new_history, shown, spans = self._spare, *self._spare_shown
         else:  # zeros: an empty slab's pixels need no writing
             new_history, shown = np.zeros(shape, dtype=np.float32), np.zeros(shape[:3], dtype=np.uint8)
+            spans = np.zeros(shape[:2] + (2,), dtype=np.int64)
         out = output_image(out, (h * s, w * s))
         _kernel(history, has, slabs, self._info, cols, runs, s, jy, 1.0 / (2.0 * sigma * sigma), tent, cap,
-                rectify, np.asarray(background, dtype=np.float32), out, new_history, shown)
+                rectify, np.asarray(background, dtype=np.float32), out, new_history, shown, spans)
         self._spare, self._spare_shown = (self.history, self._history_shown) if has else (None, None)
-        self.history, self._history_shown = new_history, shown
+        self.history, self._history_shown = new_history, (shown, spans)
         return out
