@@ -59,12 +59,25 @@ def test_the_prepass_is_its_definition_ties_and_empty_slabs_included():
     slabs = rng.uniform(0.0, 1.0, (2, 9, 11, 6)).astype(np.float32)
     slabs[..., 3] = rng.choice([0.0, 5e-5, 0.25, 0.5, 1.0], size=(2, 9, 11))  # ties, and alphas at or below empty
     slabs[1, 2:6, 3:8, 3] = 0.0  # a patch of slab 1 shows nothing
+    slabs[:, :, 9:, 3] = slabs[:, 7:, :, 3] = slabs[0, 0, :, 3] = 0.0  # margins that show nothing, and a row
     info, across = np.empty((2, 9, 11, _INFO), np.float32), np.empty((2, 9, 11, _INFO), np.float32)
-    _prepass(slabs, True, across, info)
+    content = np.empty((2, 9, 2), np.int64)
+    _prepass(slabs, True, across, info, content)
     reference = prepass_reference(slabs)
-    np.testing.assert_array_equal(info, reference)
-    _prepass(slabs, False, across, info)  # without the box (a frame that does not rectify): the rest alike
-    np.testing.assert_array_equal(info[..., 8:], reference[..., 8:])
+    # the prepass writes only where the 3x3 shows something: ``content`` spans it, first to last column of each row
+    shown = reference[..., 10] > 0.0
+    columns = np.arange(11)
+    inside = (columns >= content[..., :1]) & (columns <= content[..., 1:])
+    assert shown.any() and not shown.all() and not shown[~inside].any()
+    for k, j in np.ndindex(2, 9):
+        if shown[k, j].any():
+            cols = np.flatnonzero(shown[k, j])
+            assert (content[k, j, 0], content[k, j, 1]) == (cols[0], cols[-1])
+        else:
+            assert (content[k, j, 0], content[k, j, 1]) == (11, -1)
+    np.testing.assert_array_equal(info[inside], reference[inside])
+    _prepass(slabs, False, across, info, content)  # without the box (a frame that does not rectify): the rest alike
+    np.testing.assert_array_equal(info[inside][:, 8:], reference[inside][:, 8:])
 
 
 def test_layers_moving_apart_keep_their_history_where_one_vector_per_pixel_loses_it():

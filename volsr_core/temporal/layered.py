@@ -52,18 +52,32 @@ CLAMP_ROTATING = ("never", "fine", "always")  # where the history is clamped whi
 _INFO = 11  # per slab and LR pixel: RGBA box low (4) and high (4), motion (2), whether the 3x3 shows anything
 
 
+@numba.njit(**_INNER)
+def _reach(shows, k, j, rows, w):
+    """The columns (first, last) of LR row ``j`` of slab ``k`` that lie within one column and ``rows`` rows of a sample
+    that shows something (``shows`` (K, h, 2): per slab and row, the first and last column that does, or (w, -1));
+    (w, -1) where none does."""
+    lo, hi = w, -1
+    for y in range(max(j - rows, 0), min(j + rows + 1, shows.shape[1])):
+        if shows[k, y, 1] >= shows[k, y, 0]:
+            lo, hi = min(lo, shows[k, y, 0]), max(hi, shows[k, y, 1])
+    return (max(lo - 1, 0), min(hi + 1, w - 1)) if hi >= lo else (w, -1)
+
+
 @numba.njit(parallel=True, **_NB)
-def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, box, dst):
+def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, box, shows, rows, dst):
     """Per slab and LR pixel of ``src`` (K, h, w, C): over it and its two neighbours in its row (``vertical``: its
     column), the minimum of the four channels from ``lo_at``, the maximum of the four from ``hi_at`` and, of the
     most opaque of the three (alpha at ``alpha_at``; the first among equals, from the left or the top), the alpha
-    and the motion at ``motion_at``, into ``dst`` (K, h, w, _INFO): low 0-3, high 4-7, motion 8-9, alpha 10.
-    Without ``box`` the minima and maxima are skipped (low and high left at +1e30 and -1e30)."""
+    and the motion at ``motion_at``, into ``dst`` (K, h, w, _INFO): low 0-3, high 4-7, motion 8-9, alpha 10; only at
+    the pixels within ``rows`` rows (:func:`_reach`) of a sample that shows something (``shows``), the rest left as it
+    was. Without ``box`` the minima and maxima are skipped (low and high left at +1e30 and -1e30)."""
     n_slabs, h, w = src.shape[0], src.shape[1], src.shape[2]
     dy, dx = (1, 0) if vertical else (0, 1)
     for j in numba.prange(h):
         for k in range(n_slabs):
-            for i in range(w):
+            first, last = _reach(shows, k, j, rows, w)
+            for i in range(first, last + 1):
                 lo0 = lo1 = lo2 = lo3 = np.float32(1e30)
                 hi0 = hi1 = hi2 = hi3 = np.float32(-1e30)
                 best = np.float32(_EMPTY)
@@ -111,7 +125,8 @@ def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, i
         # the HR pixels whose nearest LR sample is lx (columns runs[lx] .. runs[lx + 1] - 1) share its slab's
         # motion and box, so the history's rows and their weights are found once per run
         for lx in range(first, last + 1):
-            if info[k, ly, lx, 10] == 0.0:  # the slab shows nothing around here: an empty history
+            if lx < content[k, ly, 0] or lx > content[k, ly, 1] or info[k, ly, lx, 10] == 0.0:
+                # the slab shows nothing around here (``info`` holds nothing outside ``content``): an empty history
                 for x in range(runs[lx], runs[lx + 1]):
                     if shown[k, y, x]:  # else the buffer holds zeros there already
                         for c in range(5):
@@ -170,20 +185,33 @@ def _prepass_kernel(sources: str):
     (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles it anew when that changes."""
 
     @numba.njit(parallel=True, **_NB)
-    def prepass(slabs, box, across, info):
+    def prepass(slabs, box, across, info, content):
         """Per slab and LR pixel of ``slabs`` (K, h, w, SLAB_CHANNELS): the 3x3 neighbourhood's RGBA min/max, the
         motion vector the HR pixels nearest it take (its own where its slab shows something, else that of the most
         opaque neighbour, the first in row order among equals) and whether any of the nine shows something, into
         ``info`` (K, h, w, _INFO); the min/max only with ``box`` (a frame that rectifies: 0.47 against 0.27 ms for
         two 128² slabs); separably (:func:`_widen`): three pixels of each row first (into the work buffer ``across``,
-        of ``info``'s shape), then three rows of those, then each pixel's own motion where it shows."""
+        of ``info``'s shape), then three rows of those, then each pixel's own motion where it shows. Only where the
+        3x3 shows something, and the columns of each row that lie there, first and last, into ``content`` (K, h, 2;
+        (w, -1) for a row without): ``info`` elsewhere is left as it was (the background around a volume, most of a
+        frame's pixels, takes no work)."""
         sources  # noqa: B018 - it keys numba's disk cache on the layout module (hashing.sources_sha256)
-        _widen(slabs, SLAB_RGBA, SLAB_RGBA, SLAB_RGBA + 3, SLAB_MOTION, False, box, across)
-        _widen(across, 0, 4, 10, 8, True, box, info)
         n_slabs, h, w = slabs.shape[0], slabs.shape[1], slabs.shape[2]
+        shows = np.empty((n_slabs, h, 2), dtype=np.int64)  # per slab and row: first and last column that shows
         for j in numba.prange(h):
             for k in range(n_slabs):
+                shows[k, j, 0], shows[k, j, 1] = w, -1
                 for i in range(w):
+                    if slabs[k, j, i, SLAB_RGBA + 3] > _EMPTY:
+                        shows[k, j, 0], shows[k, j, 1] = min(shows[k, j, 0], i), i
+        # the rows' pass where the columns' pass will read it, two rows around the samples that show
+        _widen(slabs, SLAB_RGBA, SLAB_RGBA, SLAB_RGBA + 3, SLAB_MOTION, False, box, shows, 2, across)
+        _widen(across, 0, 4, 10, 8, True, box, shows, 1, info)
+        for j in numba.prange(h):
+            for k in range(n_slabs):
+                first, last = _reach(shows, k, j, 1, w)
+                content[k, j, 0], content[k, j, 1] = first, last
+                for i in range(first, last + 1):
                     if slabs[k, j, i, SLAB_RGBA + 3] > _EMPTY:
                         info[k, j, i, 8] = slabs[k, j, i, SLAB_MOTION]
                         info[k, j, i, 9] = slabs[k, j, i, SLAB_MOTION + 1]
@@ -197,18 +225,9 @@ def _row_kernel(sources: str):
     (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles it anew when that changes."""
 
     @numba.njit(parallel=True, **_NB)
-    def kernel(history, has_history, slabs, info, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background, out,
-               new_history, shown, spans):
+    def kernel(history, has_history, slabs, info, content, cols, runs, scale, jy, inv2s2, tent, cap, rectify,
+               background, out, new_history, shown, spans):
         sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
-        n_slabs, lr_h, lr_w = info.shape[0], info.shape[1], info.shape[2]
-        content = np.empty((n_slabs, lr_h, 2), dtype=np.int64)  # per slab and LR row: first and last column shown
-        for j in numba.prange(lr_h):
-            for k in range(n_slabs):
-                content[k, j, 0], content[k, j, 1] = lr_w, -1
-                for i in range(lr_w):
-                    if info[k, j, i, 10] != 0.0:
-                        content[k, j, 0] = min(content[k, j, 0], i)
-                        content[k, j, 1] = i
         for y in numba.prange(out.shape[0]):
             acc = np.empty((out.shape[1], 4), dtype=np.float32)
             _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, inv2s2, tent, cap, rectify,
@@ -241,8 +260,9 @@ class LayeredUpsampler(TemporalUpsampler):
         if clamp_rotating not in CLAMP_ROTATING:
             raise ValueError(f"clamp_rotating must be one of {CLAMP_ROTATING}, got {clamp_rotating!r}")
         self.clamp_rotating = clamp_rotating
-        self._info: np.ndarray | None = None  # the prepass's results, and its work buffer
+        self._info: np.ndarray | None = None  # the prepass's results, its work buffer and where it wrote them
         self._across: np.ndarray | None = None
+        self._content: np.ndarray | None = None
         # per history buffer, where it may hold something other than zeros (a slab's pixels shown there): (K, H, W)
         # uint8, 1 there, and (K, H, 2) int64, per slab and row the span of columns they lie in; so a pixel that stays
         # empty is not written again, and a row's columns outside the span and the slab's LR content are not visited
@@ -287,15 +307,16 @@ class LayeredUpsampler(TemporalUpsampler):
         if self._info is None or self._info.shape[:3] != (n_slabs, h, w):
             self._info = np.empty((n_slabs, h, w, _INFO), dtype=np.float32)
             self._across = np.empty_like(self._info)
-        _prepass(slabs, rectify, self._across, self._info)
+            self._content = np.empty((n_slabs, h, 2), dtype=np.int64)
+        _prepass(slabs, rectify, self._across, self._info, self._content)
         if self._spare is not None and self._spare.shape == shape:
             new_history, shown, spans = self._spare, *self._spare_shown
         else:  # zeros: an empty slab's pixels need no writing
             new_history, shown = np.zeros(shape, dtype=np.float32), np.zeros(shape[:3], dtype=np.uint8)
             spans = np.zeros(shape[:2] + (2,), dtype=np.int64)
         out = output_image(out, (h * s, w * s))
-        _kernel(history, has, slabs, self._info, cols, runs, s, jy, 1.0 / (2.0 * sigma * sigma), tent, cap,
-                rectify, np.asarray(background, dtype=np.float32), out, new_history, shown, spans)
+        _kernel(history, has, slabs, self._info, self._content, cols, runs, s, jy, 1.0 / (2.0 * sigma * sigma), tent,
+                cap, rectify, np.asarray(background, dtype=np.float32), out, new_history, shown, spans)
         self._spare, self._spare_shown = (self.history, self._history_shown) if has else (None, None)
         self.history, self._history_shown = new_history, (shown, spans)
         return out
