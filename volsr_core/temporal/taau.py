@@ -28,7 +28,8 @@ orbit per frame (at 1024² and 5° by 0.00-0.27 dB), and converges on a still ca
    frame's pixels) the clamp gives that colour whatever the history says, and so does step 1's splat, whose
    2x2 samples lie among the nine: the pixel is that colour, without step 3's colour fetch, the splat or
    the blend (the same values; the fetch skipped: 0.78-0.83 of the kernel's time at 512² and 1024²; the
-   splat and the blend too: 0.73-0.87 of that, docs/temporal.md, "Speed").
+   splat and the blend too: 0.73-0.87 of that; such a run in a loop of its own, without the history rows' Catmull-Rom
+   weights: 0.90-0.94 of that, docs/temporal.md, "Speed").
 6. **History length**: ``n`` is capped at ``max_count / (1 + rotation / cap_angle)`` with
    ``rotation`` the view's rotation since the last frame (degrees): shading (headlight) and the
    parallax of semi-transparent layers change the image with the view direction, so history ages
@@ -140,8 +141,6 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         iy = int(sy)
         ty = sy - iy
         iy1 = min(iy + 1, hr_h - 1)
-        rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))
-        ay = _catmull_rom_weights(ty)
         gated = disocclusion > 0.0 and box[ly, lx, 6] > 0.5
         lo0, lo1, lo2, hi0, hi1, hi2 = box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2], box[ly, lx, 3], box[ly, lx, 4], \
             box[ly, lx, 5]
@@ -149,22 +148,40 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         # history says and the splat (whose 2x2 samples lie among the nine) gives it too, so the run's pixels are that
         # colour: no Catmull-Rom fetch (48 loads a pixel), splat or blend; only the history's weight is still fetched
         flat = rectify and lo0 == hi0 and lo1 == hi1 and lo2 == hi2
-        f0, f1, f2 = _to_rgb(lo0, lo1, lo2)
+        if flat:  # in a loop of its own, without the rows' Catmull-Rom weights or a test of ``flat`` per pixel
+            f0, f1, f2 = _to_rgb(lo0, lo1, lo2)
+            for x in range(runs[lx], runs[lx + 1]):
+                wx0, wx1 = cols[x, 3], cols[x, 4]
+                a = wy0 * wx0 + wy0 * wx1 + wy1 * wx0 + wy1 * wx1
+                n = 0.0
+                sx = x + mx
+                if rows_in and -0.5 < sx < hr_w - 0.5:
+                    sx = min(max(sx, 0.0), hr_w - 1.0)
+                    ix = int(sx)
+                    ix1 = min(ix + 1, hr_w - 1)
+                    if not (gated and d - _nearest_depth(history, iy, iy1, ix, ix1) > disocclusion):
+                        n = _history_weight(history, iy, iy1, ix, ix1, sx - ix, ty, cap)
+                out[y, x, 0], out[y, x, 1], out[y, x, 2] = f0, f1, f2
+                new_history[y, x, 0], new_history[y, x, 1], new_history[y, x, 2] = f0, f1, f2
+                new_history[y, x, 3] = min(n + a, cap)
+                new_history[y, x, 4] = d
+                if keep_aux:
+                    seen = 1.0 if n > 0.0 else 0.0
+                    aux[y, x, 0], aux[y, x, 1], aux[y, x, 2] = seen * f0, seen * f1, seen * f2
+                    aux[y, x, 3] = n / (n + a)
+            continue
+        rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))
+        ay = _catmull_rom_weights(ty)
         last_ix = -2
         k0 = k1 = k2 = k3 = (np.float32(0.0), np.float32(0.0), np.float32(0.0))  # the four columns' RGB
         for x in range(runs[lx], runs[lx + 1]):
             # 1. the current estimate: 2x2 Gaussian splat, blended with bilinear weights by ``tent``
-            if flat:  # its four samples are that one colour: only its confidence is wanted, as _splat_weights sums it
-                e0, e1, e2 = f0, f1, f2
-                wx0, wx1 = cols[x, 3], cols[x, 4]
-                a = wy0 * wx0 + wy0 * wx1 + wy1 * wx0 + wy1 * wx1
-            else:
-                x0 = int(cols[x, 1])
-                x1 = int(cols[x, 2])
-                w00, w01, w10, w11, a, inv = _splat_weights(wy0, wy1, cols[x, 3], cols[x, 4], dy0, cols[x, 5], tent)
-                e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
-                e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
-                e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
+            x0 = int(cols[x, 1])
+            x1 = int(cols[x, 2])
+            w00, w01, w10, w11, a, inv = _splat_weights(wy0, wy1, cols[x, 3], cols[x, 4], dy0, cols[x, 5], tent)
+            e0 = (w00 * lr[y0, x0, 0] + w01 * lr[y0, x1, 0] + w10 * lr[y1, x0, 0] + w11 * lr[y1, x1, 0]) * inv
+            e1 = (w00 * lr[y0, x0, 1] + w01 * lr[y0, x1, 1] + w10 * lr[y1, x0, 1] + w11 * lr[y1, x1, 1]) * inv
+            e2 = (w00 * lr[y0, x0, 2] + w01 * lr[y0, x1, 2] + w10 * lr[y1, x0, 2] + w11 * lr[y1, x1, 2]) * inv
             n = 0.0
             h0 = h1 = h2 = 0.0
             sx = x + mx
@@ -179,9 +196,7 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                     dropped = d - _nearest_depth(history, iy, iy1, ix, ix1) > disocclusion
                 if not dropped:  # 3. accumulated weight (bilinear) and Catmull-Rom colour
                     n = _history_weight(history, iy, iy1, ix, ix1, tx, ty, cap)
-                if n > 0.0 and flat:
-                    h0, h1, h2 = f0, f1, f2
-                elif n > 0.0:
+                if n > 0.0:
                     if ix == last_ix + 1:  # the next column of the run: one new vertical pass
                         k0, k1, k2 = k1, k2, k3
                         k3 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
@@ -195,9 +210,7 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                     if rectify:  # 5. clamp into the YCoCg box of the 3x3 LR neighbourhood
                         h0, h1, h2 = _rectify(h0, h1, h2, lo0, lo1, lo2, hi0, hi1, hi2)
             # 7. blend
-            if flat:  # the history clamped into a one-colour box and the estimate are that colour, and so is the blend
-                o0, o1, o2 = f0, f1, f2
-            elif n > 0.0:
+            if n > 0.0:
                 inv = 1.0 / (n + a)
                 o0 = (n * h0 + a * e0) * inv
                 o1 = (n * h1 + a * e1) * inv
