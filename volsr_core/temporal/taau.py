@@ -29,7 +29,7 @@ orbit per frame (at 1024² and 5° by 0.00-0.27 dB), and converges on a still ca
    2x2 samples lie among the nine: the pixel is that colour, without step 3's colour fetch, the splat or
    the blend (the same values; the fetch skipped: 0.78-0.83 of the kernel's time at 512² and 1024²; the
    splat and the blend too: 0.73-0.87 of that; such a run in a loop of its own, without the history rows' Catmull-Rom
-   weights: 0.90-0.94 of that, docs/temporal.md, "Speed").
+   weights: 0.91-0.94 of that, docs/temporal.md, "Speed").
 6. **History length**: ``n`` is capped at ``max_count / (1 + rotation / cap_angle)`` with
    ``rotation`` the view's rotation since the last frame (degrees): shading (headlight) and the
    parallax of semi-transparent layers change the image with the view direction, so history ages
