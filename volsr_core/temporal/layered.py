@@ -34,6 +34,8 @@ Measured in docs/temporal.md ("Layered history"); feed it ``halton_jitter(frame,
 """
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
@@ -145,6 +147,12 @@ def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, i
             iy1 = min(iy + 1, hr_h - 1)
             ty = np.float32(sy - iy)
             uy = one - ty
+            # along the run the history is fetched at one fraction past consecutive columns (x + floor(mx)), so its
+            # bilinear weights are the run's; only where a fetch reaches the history's edge is it clamped per pixel
+            shift = int(math.floor(mx))
+            tx = np.float32(mx - shift)
+            ux = one - tx
+            r00, r01, r10, r11 = ux * uy, tx * uy, ux * ty, tx * ty
             for x in range(runs[lx], runs[lx + 1]):
                 x0 = int(cols[x, 1])
                 x1 = int(cols[x, 2])
@@ -153,15 +161,17 @@ def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, i
                 a, inv = np.float32(va), np.float32(vinv)
                 n = zero
                 b00 = b01 = b10 = b11 = zero
-                ix = ix1 = 0
-                sx = x + mx
-                if rows_in and -0.5 < sx < hr_w - 0.5:
-                    sx = min(max(sx, 0.0), hr_w - 1.0)
+                ix, ix1 = x + shift, 0
+                if rows_in and 0 <= ix < hr_w - 1:
+                    ix1 = ix + 1
+                    b00, b01, b10, b11 = r00, r01, r10, r11
+                    n = min(_taps(history, k, iy, iy1, ix, ix1, 4, b00, b01, b10, b11), cap32)
+                elif rows_in and -0.5 < x + mx < hr_w - 0.5:
+                    sx = min(max(x + mx, 0.0), hr_w - 1.0)
                     ix = min(int(sx), hr_w - 2) if hr_w > 1 else 0
                     ix1 = min(ix + 1, hr_w - 1)
-                    tx = np.float32(sx - ix)
-                    ux = one - tx
-                    b00, b01, b10, b11 = ux * uy, tx * uy, ux * ty, tx * ty
+                    ex = np.float32(sx - ix)
+                    b00, b01, b10, b11 = (one - ex) * uy, ex * uy, (one - ex) * ty, ex * ty
                     n = min(_taps(history, k, iy, iy1, ix, ix1, 4, b00, b01, b10, b11), cap32)
                 share = one / (n + a)
                 behind = one - acc[x, 3]
