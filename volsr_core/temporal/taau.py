@@ -123,6 +123,19 @@ def _moves(motion, eps):
 
 
 @numba.njit(**_INNER)
+def _fetch_columns(x, shift, run_tx, sx, width):
+    """(ix, ix1, tx, in_run): the history columns HR column ``x`` fetches between (its left and right bilinear taps)
+    and the fraction past the left one, for a run whose fetches lie at ``run_tx`` past column x + ``shift``; at the
+    history's edge (``in_run`` False) from ``sx``, the fetch's position, clamped to [0, ``width`` - 1]."""
+    ix = x + shift
+    if 0 <= ix < width - 1:
+        return ix, ix + 1, run_tx, True
+    sx = min(max(sx, 0.0), width - 1.0)
+    ix = int(sx)
+    return ix, min(ix + 1, width - 1), sx - ix, False
+
+
+@numba.njit(**_INNER)
 def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
          rectify, out, new_history, keep_aux, aux):
     hr_h, hr_w = out.shape[0], out.shape[1]
@@ -148,6 +161,10 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         # history says and the splat (whose 2x2 samples lie among the nine) gives it too, so the run's pixels are that
         # colour: no Catmull-Rom fetch (48 loads a pixel), splat or blend; only the history's weight is still fetched
         flat = rectify and lo0 == hi0 and lo1 == hi1 and lo2 == hi2
+        # along the run the history is fetched at one fraction past consecutive columns (x + floor(mx)): its weights
+        # are the run's, found per pixel only where a fetch reaches the history's edge
+        shift = int(math.floor(mx))
+        run_tx = mx - shift
         if flat:  # in a loop of its own, without the rows' Catmull-Rom weights or a test of ``flat`` per pixel
             f0, f1, f2 = _to_rgb(lo0, lo1, lo2)
             for x in range(runs[lx], runs[lx + 1]):
@@ -156,11 +173,9 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                 n = 0.0
                 sx = x + mx
                 if rows_in and -0.5 < sx < hr_w - 0.5:
-                    sx = min(max(sx, 0.0), hr_w - 1.0)
-                    ix = int(sx)
-                    ix1 = min(ix + 1, hr_w - 1)
+                    ix, ix1, tx, _ = _fetch_columns(x, shift, run_tx, sx, hr_w)
                     if not (gated and d - _nearest_depth(history, iy, iy1, ix, ix1) > disocclusion):
-                        n = _history_weight(history, iy, iy1, ix, ix1, sx - ix, ty, cap)
+                        n = _history_weight(history, iy, iy1, ix, ix1, tx, ty, cap)
                 out[y, x, 0], out[y, x, 1], out[y, x, 2] = f0, f1, f2
                 new_history[y, x, 0], new_history[y, x, 1], new_history[y, x, 2] = f0, f1, f2
                 new_history[y, x, 3] = min(n + a, cap)
@@ -172,6 +187,7 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
             continue
         rows = (max(iy - 1, 0), iy, iy1, min(iy + 2, hr_h - 1))
         ay = _catmull_rom_weights(ty)
+        run_ax = _catmull_rom_weights(run_tx)
         # the splat and blend in float32, as the images: float64 weights converted every load (the kernel now takes
         # 0.96-0.98 of the time it took with them)
         zero, one = np.float32(0.0), np.float32(1.0)
@@ -191,10 +207,8 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
             h0 = h1 = h2 = zero
             sx = x + mx
             if rows_in and -0.5 < sx < hr_w - 0.5:
-                sx = min(max(sx, 0.0), hr_w - 1.0)
-                ix = int(sx)
-                tx = sx - ix
-                ix1 = min(ix + 1, hr_w - 1)
+                ix, ix1, tx, in_run = _fetch_columns(x, shift, run_tx, sx, hr_w)
+                ax = run_ax if in_run else _catmull_rom_weights(tx)
                 # 4. disocclusion (depth, where the neighbourhood shows parallax)
                 dropped = False
                 if gated:
@@ -211,7 +225,7 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
                         k2 = _history_column(history, ix1, rows, ay)
                         k3 = _history_column(history, min(ix + 2, hr_w - 1), rows, ay)
                     last_ix = ix
-                    h0, h1, h2 = _mix(_catmull_rom_weights(tx), k0, k1, k2, k3)
+                    h0, h1, h2 = _mix(ax, k0, k1, k2, k3)
                     if rectify:  # 5. clamp into the YCoCg box of the 3x3 LR neighbourhood
                         h0, h1, h2 = _rectify(h0, h1, h2, lo0, lo1, lo2, hi0, hi1, hi2)
             # 7. blend
