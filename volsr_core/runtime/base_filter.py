@@ -171,17 +171,31 @@ def _band_orientation(planes: np.ndarray, y0: int, y1: int, height: int, halo: i
                 out[x] += tap * product[x + k]
 
 
+@numba.njit(**_NB)
+def _interleaved(planes: np.ndarray, low: np.float32, high: np.float32, out: np.ndarray) -> None:
+    """An RGB row ``out`` (W, 3) from its channels apart, ``planes`` (>= 3, >= W), clamped to [``low``, ``high``]: pixel
+    by pixel, each written whole (a pass per channel writing every third float made XS 4x's filter take 1.1-1.2 times as long,
+    benchmarks/bench_base_filter.py)."""
+    flat = out.reshape(out.shape[0] * 3)
+    red, green, blue = planes[0], planes[1], planes[2]
+    for x in range(out.shape[0]):
+        flat[3 * x] = min(max(red[x], low), high)
+        flat[3 * x + 1] = min(max(green[x], low), high)
+        flat[3 * x + 2] = min(max(blue[x], low), high)
+
+
 @functools.lru_cache(maxsize=None)
 def _filter_bands(taps: int, doubled: bool) -> Callable:
     """The kernel for one filter of ``taps`` x ``taps`` (compiled once per size and ``doubled``, cached on disk):
     ``bands(image, weights, bias, low, high, planes, ends, total, lines, phase_w, out)`` fills ``out`` (H, W, C) from
     ``image`` (H, W, C) through ``weights`` (1, C, k, k) and ``bias`` (1, C), :data:`BAND_ROWS` rows per band
     (``planes`` (bands, C, BAND_ROWS + k - 1, W + k - 1), ``ends`` (bands, BAND_ROWS + k - 1, 2) int64 and ``total``
-    (bands, W) its work buffers): the band's clipped, padded planes (:func:`_fill_band`) and their rows' flat ends
+    (bands, C, W) its work buffers): the band's clipped, padded planes (:func:`_fill_band`) and their rows' flat ends
     (:func:`_flat_ends`), then per row and channel, per tap row, each pixel's ``taps`` products summed in registers
     into a row accumulator (the tap count a compile-time constant, so the taps unroll and the pixels vectorise:
     1.7 times as fast at 9 taps as a pass per tap over the row) between the row's flat ends
-    (:func:`_sums_needed`; one constant each side), clamped to [``low``, ``high``] and interleaved into ``out``.
+    (:func:`_sums_needed`; one constant each side), then the row's channels clamped to [``low``, ``high``] and
+    interleaved into ``out`` (:func:`_interleaved`).
     ``doubled``: each row goes into the band's row of ``lines`` (bands, C, W), channels apart, instead and is written
     to ``out`` (H, 2W, C) doubled in width by the resampling's first stage (``_across_planes_doubled`` with
     ``phase_w``): the first pass of the filter and a 2x stretch in one (:func:`filter_image`)."""
@@ -202,7 +216,7 @@ def _filter_bands(taps: int, doubled: bool) -> Callable:
                 for c in range(channels):
                     # views from ``start``: indices that cannot be negative need no wraparound, so the loop
                     # vectorises (over range(start, stop) it did not: 5 times the time)
-                    summed = row_total[start:stop]
+                    summed = row_total[c, start:stop]
                     summed[:] = bias[0, c]
                     for dy in range(taps):
                         source = band[c, y - y0 + dy, start:]
@@ -212,15 +226,15 @@ def _filter_bands(taps: int, doubled: bool) -> Callable:
                             for dx in range(taps):
                                 value += row[dx] * source[x + dx]
                             summed[x] = value
-                    row_total[:start] = _constant_sum(weights, bias, 0, c, band[c, y - y0, 0])
-                    row_total[stop:] = _constant_sum(weights, bias, 0, c, band[c, y - y0, last])
-                    for x in range(width):
-                        if doubled:
-                            line[c, x] = min(max(row_total[x], low), high)
-                        else:
-                            out[y, x, c] = min(max(row_total[x], low), high)
+                    row_total[c, :start] = _constant_sum(weights, bias, 0, c, band[c, y - y0, 0])
+                    row_total[c, stop:] = _constant_sum(weights, bias, 0, c, band[c, y - y0, last])
+                    if doubled:
+                        for x in range(width):
+                            line[c, x] = min(max(row_total[c, x], low), high)
                 if doubled:
                     _across_planes_doubled(line, phase_w, out[y].reshape(out.shape[1] * out.shape[2]))
+                else:
+                    _interleaved(row_total, low, high, out[y])
 
     return bands
 
@@ -231,7 +245,8 @@ def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
     ends, luma, across, work, lines, phase_w, out)``, ``weights`` (2, C, k, k), ``bias`` (2, C), ``lines``,
     ``phase_w`` and ``doubled`` as there; per band, ``planes`` (C, BAND_ROWS + 2 * halo, W + k - 1) with halo =
     max(k // 2, r + 1) for ``smoothing``'s radius r, ``ends`` of its rows, ``luma`` of the planes' rows, ``across``
-    (BAND_ROWS + 2r, W) and ``work`` (4, W + 2r)): the band's orientation stages (:func:`_band_orientation`), then
+    (BAND_ROWS + 2r, W) and ``work`` (2 + 2C, W + 2r): a row of the orientation's products, the C channels' sums
+    of the first filter, of the second, and the pick): the band's orientation stages (:func:`_band_orientation`), then
     per row the vertical smoothing's sign, and both filters summed in the same pass (one load, two products) between
     the row's flat ends, each pixel taking filter ``second`` by a blend with weight 0 or 1 (no branch, so it
     vectorises too)."""
@@ -248,7 +263,8 @@ def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
             y0 = b * BAND_ROWS
             y1 = min(y0 + BAND_ROWS, height)
             band, line = planes[b], lines[b]
-            first, other, pick = work[b, 1], work[b, 2], work[b, 3]
+            # per channel its first filter's and its second's sums, then which one each pixel takes
+            first, other, pick = work[b, 1:1 + channels], work[b, 1 + channels:1 + 2 * channels], work[b, -1]
             _fill_band(image, y0 - halo, pad, band, y1 - y0 + 2 * halo)
             _flat_ends(band, y1 - y0 + 2 * halo, ends[b])
             _band_orientation(band, y0, y1, height, halo, pad, luma_weights, smoothing, luma[b], across[b],
@@ -264,7 +280,8 @@ def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
                 j0 = y - y0 + halo - pad  # the band row of the first tap row
                 start, stop = _sums_needed(band, ends[b], j0, taps, width)
                 for c in range(channels):
-                    summed, summed_other = first[start:stop], other[start:stop]  # as in _filter_bands
+                    mine, mine_other = first[c], other[c]
+                    summed, summed_other = mine[start:stop], mine_other[start:stop]  # as in _filter_bands
                     summed[:] = bias[0, c]
                     summed_other[:] = bias[1, c]
                     for dy in range(taps):
@@ -277,17 +294,19 @@ def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
                                 value += row[dx] * tap
                                 value_other += row_other[dx] * tap
                             summed[x], summed_other[x] = value, value_other
-                    first[:start] = _constant_sum(weights, bias, 0, c, band[c, j0, 0])
-                    other[:start] = _constant_sum(weights, bias, 1, c, band[c, j0, 0])
-                    first[stop:width] = _constant_sum(weights, bias, 0, c, band[c, j0, last])
-                    other[stop:width] = _constant_sum(weights, bias, 1, c, band[c, j0, last])
+                    mine[:start] = _constant_sum(weights, bias, 0, c, band[c, j0, 0])
+                    mine_other[:start] = _constant_sum(weights, bias, 1, c, band[c, j0, 0])
+                    mine[stop:width] = _constant_sum(weights, bias, 0, c, band[c, j0, last])
+                    mine_other[stop:width] = _constant_sum(weights, bias, 1, c, band[c, j0, last])
                     for x in range(width):
                         if doubled:
-                            line[c, x] = min(max(first[x] + pick[x] * (other[x] - first[x]), low), high)
+                            line[c, x] = min(max(mine[x] + pick[x] * (mine_other[x] - mine[x]), low), high)
                         else:
-                            out[y, x, c] = min(max(first[x] + pick[x] * (other[x] - first[x]), low), high)
+                            mine[x] += pick[x] * (mine_other[x] - mine[x])
                 if doubled:
                     _across_planes_doubled(line, phase_w, out[y].reshape(out.shape[1] * out.shape[2]))
+                else:
+                    _interleaved(first, low, high, out[y])
 
     return bands
 
@@ -328,13 +347,13 @@ def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
         planes = scratch.get("planes", (n_bands, channels, band_rows, width + 2 * pad))
         luma = scratch.get("luma", (n_bands, band_rows, width + 2 * pad))
         across = scratch.get("across", (n_bands, BAND_ROWS + 2 * r, width))
-        work = scratch.get("work", (n_bands, 4, width + 2 * r))
+        work = scratch.get("work", (n_bands, 2 + 2 * channels, width + 2 * r))
         ends = scratch.get("ends", (n_bands, band_rows, 2), np.int64)
         _filter_bands_pair(weights.shape[2], doubled)(image, weights, bias, LUMA, SMOOTHING, low, high, planes, ends,
                                                       luma, across, work, lines, phase_w, rows)
     else:
         planes = scratch.get("planes", (n_bands, channels, BAND_ROWS + 2 * pad, width + 2 * pad))
-        total = scratch.get("total", (n_bands, width))
+        total = scratch.get("total", (n_bands, channels, width))
         ends = scratch.get("ends", (n_bands, BAND_ROWS + 2 * pad, 2), np.int64)
         _filter_bands(weights.shape[2], doubled)(image, weights, bias, low, high, planes, ends, total, lines, phase_w,
                                                  rows)
