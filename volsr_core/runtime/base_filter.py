@@ -64,19 +64,24 @@ _NO_PHASES = _doubling_weights(1, 3, True, -0.5)  # an unstretched call's (read-
 
 @numba.njit(**_NB)
 def _fill_band(image: np.ndarray, first: int, pad: int, planes: np.ndarray, rows: int) -> None:
-    """The first ``rows`` rows of a band's ``planes`` (C, >= rows, W + 2 ``pad``): image rows ``first`` + j (edge
-    rows repeated past the image), clipped to [0, 1], channels apart, ``pad`` edge pixels repeated each side."""
-    height, width, channels = image.shape
+    """The first ``rows`` rows of a band's ``planes`` (3, >= rows, W + 2 ``pad``): RGB image rows ``first`` + j (edge
+    rows repeated past the image), clipped to [0, 1], channels apart, ``pad`` edge pixels repeated each side; each
+    image row read once, pixel by pixel (a pass per channel reading every third float made XS 4x's filter take 1.2
+    times as long, ``benchmarks/bench_base_filter.py``)."""
+    height, width = image.shape[0], image.shape[1]
+    zero, one = np.float32(0.0), np.float32(1.0)
     for j in range(rows):
-        source = image[min(max(first + j, 0), height - 1)]
-        for c in range(channels):
+        source = image[min(max(first + j, 0), height - 1)].reshape(width * 3)
+        red, green, blue = planes[0, j, pad:], planes[1, j, pad:], planes[2, j, pad:]
+        for x in range(width):
+            red[x] = min(max(source[3 * x], zero), one)
+            green[x] = min(max(source[3 * x + 1], zero), one)
+            blue[x] = min(max(source[3 * x + 2], zero), one)
+        for c in range(3):
             row = planes[c, j]
-            left = min(max(source[0, c], np.float32(0.0)), np.float32(1.0))
-            right = min(max(source[width - 1, c], np.float32(0.0)), np.float32(1.0))
+            left, right = row[pad], row[pad + width - 1]
             for x in range(pad):
                 row[x], row[width + pad + x] = left, right
-            for x in range(width):
-                row[x + pad] = min(max(source[x, c], np.float32(0.0)), np.float32(1.0))
 
 
 @numba.njit(**_NB)
@@ -174,8 +179,8 @@ def _band_orientation(planes: np.ndarray, y0: int, y1: int, height: int, halo: i
 @numba.njit(**_NB)
 def _interleaved(planes: np.ndarray, low: np.float32, high: np.float32, out: np.ndarray) -> None:
     """An RGB row ``out`` (W, 3) from its channels apart, ``planes`` (>= 3, >= W), clamped to [``low``, ``high``]: pixel
-    by pixel, each written whole (a pass per channel writing every third float made XS 4x's filter take 1.1-1.2 times as long,
-    benchmarks/bench_base_filter.py)."""
+    by pixel, each written whole (a pass per channel writing every third float made XS 4x's filter take 1.1-1.2 times
+    as long, ``benchmarks/bench_base_filter.py``)."""
     flat = out.reshape(out.shape[0] * 3)
     red, green, blue = planes[0], planes[1], planes[2]
     for x in range(out.shape[0]):
