@@ -187,14 +187,17 @@ def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, i
                 new_history[k, y, x, 4] = min(n + a, cap32)
                 shown[k, y, x] = 1
         spans[k, y, 0], spans[k, y, 1] = (new_lo, new_hi) if new_hi > new_lo else (0, 0)
-    for x in range(hr_w):
-        if drawn_lo <= x < drawn_hi:
-            behind = 1.0 - acc[x, 3]
-            for c in range(3):
-                out[y, x, c] = acc[x, c] + behind * background[c]
-        else:
-            for c in range(3):
-                out[y, x, c] = background[c]
+    b0, b1, b2 = background[0], background[1], background[2]
+    drawn_lo = min(drawn_lo, drawn_hi)
+    for x in range(drawn_lo):
+        out[y, x, 0], out[y, x, 1], out[y, x, 2] = b0, b1, b2
+    for x in range(drawn_lo, drawn_hi):
+        behind = one - acc[x, 3]
+        out[y, x, 0] = acc[x, 0] + behind * b0
+        out[y, x, 1] = acc[x, 1] + behind * b1
+        out[y, x, 2] = acc[x, 2] + behind * b2
+    for x in range(max(drawn_hi, drawn_lo), hr_w):
+        out[y, x, 0], out[y, x, 1], out[y, x, 2] = b0, b1, b2
 
 
 def _prepass_kernel(sources: str):
