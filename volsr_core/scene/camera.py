@@ -280,4 +280,4 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def rotation_between(a: Camera, b: Camera) -> float:
     """Angle in degrees of the rotation taking camera ``a``'s (right, up, forward) frame to ``b``'s."""
     cos = (sum(float(u @ v) for u, v in zip(a.basis(), b.basis())) - 1.0) / 2.0  # (trace(Rb Ra^T) - 1) / 2
-    return math.degrees(math.acos(float(np.clip(cos, -1.0, 1.0))))
+    return math.degrees(math.acos(min(max(cos, -1.0), 1.0)))  # a float clamped: np.clip took 4 µs a call

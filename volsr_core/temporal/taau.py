@@ -325,7 +325,7 @@ def view_rotation(camera, previous) -> float:
     """Degrees between two cameras' directions of projection; 0 when either is None."""
     if camera is None or previous is None:
         return 0.0
-    c = float(np.clip(camera.direction_of_projection @ previous.direction_of_projection, -1.0, 1.0))
+    c = min(max(float(camera.direction_of_projection @ previous.direction_of_projection), -1.0), 1.0)
     return math.degrees(math.acos(c))
 
 
