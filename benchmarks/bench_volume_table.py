@@ -1,0 +1,113 @@
+"""Per volume of one ``volsr bench`` run: where each temporal method lies against the native + bilinear curve, what it
+gains over the bilinear upscale of its own LR size, and where its ms go (the tables of docs/performance.md's Results).
+
+    python benchmarks/bench_volume_table.py docs/bench/1024-2deg [docs/bench/512-2deg ...]
+
+A table per run, a column per volume. "vs curve": a method's PSNR less the curve's at its time (issue 12's target 2
+asks ≥ +0.5 dB of every VolSR row; :func:`~volsr_core.apps.bench.report.check_targets`, TAAU's rows measured the same
+way), with its PSNR and median total ms; for an XS row short of the margin, the time at which its PSNR would meet it;
+"− 1/K size + bilinear": its PSNR less that of the native render of its own LR size stretched bilinearly (target 3 for
+TAAU); then the ms after the LR render and the LR render's ms, by the size rendered at (TAAU, XS and the S U-Net of
+that scale). Read from bench.json alone.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from volsr_core.apps.bench.report import TARGET_MARGIN_DB, curve_psnr_at, curve_time_for
+
+
+def _rows_by_scene(rows: list[dict]) -> dict[str, dict[str, dict]]:
+    """Scene -> label -> row, the scenes in the run's order."""
+    scenes: dict[str, dict[str, dict]] = {}
+    for r in rows:
+        scenes.setdefault(r["volume"], {})[r["label"]] = r
+    return scenes
+
+
+def _temporal_labels(rows: list[dict]) -> list[str]:
+    """TAAU's rows by scale, then XS's, then the other VolSR rows, each by the size they render at."""
+    def key(r: dict) -> tuple:
+        group = 0 if r["method"] == "taau" else 1 if r["variant"] == "XS" else 2
+        return group, r["scale"], r.get("stretch", 1), str(r["variant"])
+    temporal = [r for r in rows if r["method"] in ("taau", "volsr") and r["psnr"] is not None]
+    return list(dict.fromkeys(r["label"] for r in sorted(temporal, key=key)))
+
+
+def _curve(found: dict[str, dict]) -> tuple[list[float], list[float]]:
+    curve = [r for r in found.values() if (r["method"] == "native" and r["spp"] == 1) or r["method"] == "bilinear"]
+    return [r["ms_total"] for r in curve], [r["psnr"] for r in curve]
+
+
+def run_table(results: dict) -> list[str]:
+    """The markdown lines of one run's table."""
+    s = results["settings"]
+    scenes = _rows_by_scene(results["rows"])
+    names = [volume.split(".")[0] for volume in scenes]
+    title = f"{s['size'][0]}², {s['degrees_per_frame']:g}°/frame"
+    lines = [f"| {title} | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
+
+    def line(label: str, cells: list[str]) -> None:
+        if any(c != "–" for c in cells):
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
+
+    line("native 1 spp", [f"{f['native 1 spp']['psnr']:.2f} dB, {f['native 1 spp']['ms_total']:.0f} ms"
+                          for f in scenes.values()])
+    labels = _temporal_labels(results["rows"])
+    for label in labels:
+        cells = []
+        for found in scenes.values():
+            r = found.get(label)
+            if r is None:
+                cells.append("–")
+                continue
+            margin = r["psnr"] - curve_psnr_at(*_curve(found), r["ms_total"])
+            cells.append(f"{margin:+.2f} ({r['psnr']:.2f} dB, {r['ms_total']:.0f} ms)")
+        line(f"{label}: vs curve", cells)
+    for label in (lb for lb in labels if lb.startswith("VolSR XS")):
+        cells = []
+        for found in scenes.values():
+            r = found.get(label)
+            if r is None:
+                cells.append("–")
+                continue
+            times, psnrs = _curve(found)
+            if r["psnr"] - curve_psnr_at(times, psnrs, r["ms_total"]) >= TARGET_MARGIN_DB:
+                cells.append("met")
+                continue
+            needed = curve_time_for(times, psnrs, r["psnr"] - TARGET_MARGIN_DB)
+            cells.append(f"≤ {needed:.1f} ({r['ms_total']:.1f})" if needed is not None else "at no time")
+        line(f"{label}: ms for +{TARGET_MARGIN_DB} dB at its PSNR (its ms)", cells)
+    for label in labels:
+        cells = []
+        for found in scenes.values():
+            r = found.get(label)
+            same = r and found.get(f"native 1/{r['scale']} size + bilinear")
+            cells.append(f"{r['psnr'] - same['psnr']:+.2f}" if same else "–")
+        if label.startswith(("TAAU", "VolSR XS")) or label == "VolSR S 4x":  # the U-Nets' gain: one stands for them
+            line(f"{label} − same LR size + bilinear", cells)
+    factors = sorted({found[label]["scale"] for found in scenes.values() for label in labels if label in found})
+    for factor in factors:
+        at = [label for label in labels if label.startswith(("TAAU", "VolSR XS")) or label == f"VolSR S {factor}x"]
+        at = [label for label in at if any(found.get(label, {}).get("scale") == factor for found in scenes.values())]
+        native = f"native 1/{factor} size + bilinear"
+        line(f"1/{factor} size, ms after the LR render: {' / '.join(at)}",
+             [" / ".join(f"{found[label]['ms_network']:.1f}" if label in found else "–" for label in at)
+              for found in scenes.values()])
+        line(f"1/{factor} size, LR render ms: {' / '.join([native] + at)}",
+             [" / ".join(f"{found[label]['ms_render']:.1f}" if label in found else "–" for label in [native] + at)
+              for found in scenes.values()])
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("folders", nargs="+", type=Path, help="folders holding a bench.json, a table each")
+    for folder in parser.parse_args().folders:
+        print("\n".join(run_table(json.loads((folder / "bench.json").read_text(encoding="utf-8")))) + "\n")
+
+
+if __name__ == "__main__":
+    main()
