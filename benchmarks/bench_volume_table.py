@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Callable
 
 from volsr_core.apps.bench.report import TARGET_MARGIN_DB, curve_psnr_at, curve_time_for
 
@@ -41,6 +42,24 @@ def _curve(found: dict[str, dict]) -> tuple[list[float], list[float]]:
     return [r["ms_total"] for r in curve], [r["psnr"] for r in curve]
 
 
+def _vs_curve(r: dict, found: dict[str, dict]) -> str:
+    margin = r["psnr"] - curve_psnr_at(*_curve(found), r["ms_total"])
+    return f"{margin:+.2f} ({r['psnr']:.2f} dB, {r['ms_total']:.0f} ms)"
+
+
+def _time_needed(r: dict, found: dict[str, dict]) -> str:
+    times, psnrs = _curve(found)
+    if r["psnr"] - curve_psnr_at(times, psnrs, r["ms_total"]) >= TARGET_MARGIN_DB:
+        return "met"
+    needed = curve_time_for(times, psnrs, r["psnr"] - TARGET_MARGIN_DB)
+    return f"≤ {needed:.1f} ({r['ms_total']:.1f})" if needed is not None else "at no time"
+
+
+def _over_same_size(r: dict, found: dict[str, dict]) -> str:
+    same = found.get(f"native 1/{r['scale']} size + bilinear")
+    return f"{r['psnr'] - same['psnr']:+.2f}" if same else "–"
+
+
 def run_table(results: dict) -> list[str]:
     """The markdown lines of one run's table."""
     s = results["settings"]
@@ -49,56 +68,35 @@ def run_table(results: dict) -> list[str]:
     title = f"{s['size'][0]}², {s['degrees_per_frame']:g}°/frame"
     lines = [f"| {title} | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
 
-    def line(label: str, cells: list[str]) -> None:
+    def line(name: str, cell: Callable[[dict[str, dict]], str]) -> None:
+        """A line named ``name``: ``cell(a volume's rows by label)`` per volume; none where every cell is "–"."""
+        cells = [cell(found) for found in scenes.values()]
         if any(c != "–" for c in cells):
-            lines.append(f"| {label} | " + " | ".join(cells) + " |")
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
 
-    line("native 1 spp", [f"{f['native 1 spp']['psnr']:.2f} dB, {f['native 1 spp']['ms_total']:.0f} ms"
-                          for f in scenes.values()])
+    def of(label: str, cell: Callable[[dict, dict[str, dict]], str]) -> Callable[[dict[str, dict]], str]:
+        """``cell(label's row, the volume's rows)``, "–" on a volume without that row."""
+        return lambda found: cell(found[label], found) if label in found else "–"
+
+    line("native 1 spp", of("native 1 spp", lambda r, _: f"{r['psnr']:.2f} dB, {r['ms_total']:.0f} ms"))
     labels = _temporal_labels(results["rows"])
     for label in labels:
-        cells = []
-        for found in scenes.values():
-            r = found.get(label)
-            if r is None:
-                cells.append("–")
-                continue
-            margin = r["psnr"] - curve_psnr_at(*_curve(found), r["ms_total"])
-            cells.append(f"{margin:+.2f} ({r['psnr']:.2f} dB, {r['ms_total']:.0f} ms)")
-        line(f"{label}: vs curve", cells)
+        line(f"{label}: vs curve", of(label, _vs_curve))
     for label in (lb for lb in labels if lb.startswith("VolSR XS")):
-        cells = []
-        for found in scenes.values():
-            r = found.get(label)
-            if r is None:
-                cells.append("–")
-                continue
-            times, psnrs = _curve(found)
-            if r["psnr"] - curve_psnr_at(times, psnrs, r["ms_total"]) >= TARGET_MARGIN_DB:
-                cells.append("met")
-                continue
-            needed = curve_time_for(times, psnrs, r["psnr"] - TARGET_MARGIN_DB)
-            cells.append(f"≤ {needed:.1f} ({r['ms_total']:.1f})" if needed is not None else "at no time")
-        line(f"{label}: ms for +{TARGET_MARGIN_DB} dB at its PSNR (its ms)", cells)
+        line(f"{label}: ms for +{TARGET_MARGIN_DB} dB at its PSNR (its ms)", of(label, _time_needed))
     for label in labels:
-        cells = []
-        for found in scenes.values():
-            r = found.get(label)
-            same = r and found.get(f"native 1/{r['scale']} size + bilinear")
-            cells.append(f"{r['psnr'] - same['psnr']:+.2f}" if same else "–")
         if label.startswith(("TAAU", "VolSR XS")) or label == "VolSR S 4x":  # the U-Nets' gain: one stands for them
-            line(f"{label} − same LR size + bilinear", cells)
+            line(f"{label} − same LR size + bilinear", of(label, _over_same_size))
     factors = sorted({found[label]["scale"] for found in scenes.values() for label in labels if label in found})
     for factor in factors:
         at = [label for label in labels if label.startswith(("TAAU", "VolSR XS")) or label == f"VolSR S {factor}x"]
         at = [label for label in at if any(found.get(label, {}).get("scale") == factor for found in scenes.values())]
         native = f"native 1/{factor} size + bilinear"
         line(f"1/{factor} size, ms after the LR render: {' / '.join(at)}",
-             [" / ".join(f"{found[label]['ms_network']:.1f}" if label in found else "–" for label in at)
-              for found in scenes.values()])
+             lambda found: " / ".join(f"{found[label]['ms_network']:.1f}" if label in found else "–" for label in at))
         line(f"1/{factor} size, LR render ms: {' / '.join([native] + at)}",
-             [" / ".join(f"{found[label]['ms_render']:.1f}" if label in found else "–" for label in [native] + at)
-              for found in scenes.values()])
+             lambda found: " / ".join(f"{found[label]['ms_render']:.1f}" if label in found else "–"
+                                      for label in [native] + at))
     return lines
 
 
