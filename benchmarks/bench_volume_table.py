@@ -17,7 +17,7 @@ import json
 from pathlib import Path
 from typing import Callable
 
-from volsr_core.apps.bench.report import TARGET_MARGIN_DB, curve_psnr_at, curve_time_for
+from volsr_core.apps.bench.report import TARGET_MARGIN_DB, bilinear_curve, curve_psnr_at, curve_time_for
 
 
 def _rows_by_scene(rows: list[dict]) -> dict[str, dict[str, dict]]:
@@ -38,7 +38,7 @@ def _temporal_labels(rows: list[dict]) -> list[str]:
 
 
 def _curve(found: dict[str, dict]) -> tuple[list[float], list[float]]:
-    curve = [r for r in found.values() if (r["method"] == "native" and r["spp"] == 1) or r["method"] == "bilinear"]
+    curve = bilinear_curve(list(found.values()))
     return [r["ms_total"] for r in curve], [r["psnr"] for r in curve]
 
 
