@@ -3,14 +3,15 @@ against today's TAAU, VolSR XS and the native + bilinear curve, side by side on 
 them.
 
     python benchmarks/bench_layered_taau.py [--volume CT_AVM.nii.gz:CT-AAA:0,446] [--sizes 512] [--scales 2,4]
-                                            [--slabs 2,4] [--degrees 2] [--frames 12]
+                                            [--slabs 2,4] [--degrees 2] [--frames 12] [--stretch 2]
 
 Every method renders every frame of the orbit (interleaved frame by frame, the ray caster's start jitter on, as
 ``volsr bench`` renders); PSNR against the 16-spp reference is the mean over the frames after the first four,
 times are medians over the same frames. The curve runs through native 1 spp and the 1/2, 1/3, 1/4, 1/6 and 1/8
 size + bilinear points (:func:`~volsr_core.apps.bench.report.curve_psnr_at`, the bench's target 2); each TAAU
 and VolSR row gives its distance to it at its own time. VolSR rows run the shipped XS model of each scale that has
-one (2 threads).
+one (2 threads). ``--stretch 2`` runs those models at half the size, stretched bicubically
+(``Pipeline(..., stretch=2)``: "VolSR XS 2x + bicubic 2x" is a 4x point), and leaves out the TAAU rows.
 """
 from __future__ import annotations
 
@@ -32,6 +33,7 @@ def main() -> None:
     parser = orbit_parser(__doc__.split("\n\n")[0])
     parser.set_defaults(sizes="512")
     parser.add_argument("--slabs", default="2,4")
+    parser.add_argument("--stretch", type=int, default=1, help="the XS models at 1/k of the size, stretched by k")
     args = parser.parse_args()
     scene, caster, cameras = orbit_scene(args)
     shipped = {(entry["variant"], int(entry["scale"])) for entry in shipped_models()}
@@ -40,9 +42,9 @@ def main() -> None:
         truth = [render_supersampled(caster, c, size, size, spp=16, seed=10**6 + 16 * t) for t, c in enumerate(cameras)]
         curve = [Native(caster, shape)] + [ReducedSize(caster, shape, f) for f in FACTORS]
         temporal = [Taau(caster, shape, int(s), k) for s in args.scales.split(",") for k in
-                    [0] + [int(k) for k in args.slabs.split(",")]]
+                    [0] + [int(k) for k in args.slabs.split(",")] if args.stretch == 1]
         temporal += [VolSR(Pipeline(scene.volume, scene.transfer_function, model_file("XS", int(s), "onnx"),
-                                    size=shape, threads=2, slabs=k), "XS")
+                                    size=shape, threads=2, slabs=k, stretch=args.stretch), "XS")
                      for s in args.scales.split(",") if ("XS", int(s)) in shipped
                      for k in [0] + [int(k) for k in args.slabs.split(",")]]
         scores: dict[str, list[float]] = {m.label: [] for m in curve + temporal}
