@@ -1,5 +1,6 @@
-"""The docs' relative links resolve: every ``[text](path)`` and ``[text](path#anchor)`` in README.md, docs/*.md and the
-model cards names a file of the checkout and, with an anchor, a heading of that Markdown file (GitHub's anchors)."""
+"""The docs' relative links resolve: every ``[text](path)`` and ``[text](path#anchor)`` in README.md, under docs/
+(its generated reports too) and in the model cards names a file of the checkout and, with an anchor, a heading of that
+Markdown file (GitHub's anchors)."""
 from __future__ import annotations
 
 import re
