@@ -141,6 +141,9 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--frames", type=int, default=16)
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args(argv)
+    unknown = sorted(set(args.names.split(",")) - set(SCENES) - {"phantom"})
+    if unknown:
+        parser.error(f"--names: no bench volume {', '.join(unknown)} (known: {', '.join(SCENES)}, phantom)")
     Volume.load = read_packed(args.volumes)
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
