@@ -305,6 +305,45 @@ def test_timing_passes_run_fresh_methods_over_the_same_orbit_and_leave_the_score
                   timing_passes=[methods()[::-1]])
 
 
+def test_the_ground_truth_is_rendered_for_the_scored_frames_alone_and_the_progress_bar_counts_every_render():
+    """The warm-up frames are not scored, so their ground truth (``reference_spp`` renders each, the costliest part of a
+    1024² run after the methods) is not made; the progress bar's steps are the truths made and the methods' frames."""
+    from volsr_core.apps.bench.run import bench_one, build_methods
+    from volsr_core.apps.bench.scenes import load_bench_volume
+    from volsr_core.render.raycaster import RayCaster
+    from volsr_core.scene.camera_paths import orbit_around
+
+    scene = load_bench_volume(None, None, "auto")
+    caster = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign")
+    size, warmup, spp = (24, 16), 2, 3
+    cameras = orbit_around(caster.visible_bounds(), 5, 2.0)
+    methods = build_methods(scene, caster, size, spp=(1,), factors=(2,), scales=(), threads=1)
+    sizes = []
+    render_color = caster.render_color
+
+    def noted(camera, width, height, **kwargs):  # the ray caster's own render, its image sizes noted
+        sizes.append((width, height))
+        return render_color(camera, width, height, **kwargs)
+
+    caster.render_color = noted
+
+    class Steps:  # what bench_one asks of a tqdm bar
+        count = 0
+
+        def update(self, n: int = 1) -> None:
+            self.count += n
+
+        def set_postfix_str(self, text: str) -> None:
+            pass
+
+    steps = Steps()
+    rows = bench_one(scene, caster, size, methods, cameras, reference_spp=spp, warmup=warmup, progress=steps)
+    truths = len(cameras) - warmup
+    assert sizes.count(size) == truths * spp + len(cameras), "the truth's renders and native 1 spp's, nothing more"
+    assert steps.count == truths + len(cameras) * len(methods)
+    assert all(len(row["psnr_frames"]) == truths for row in rows)
+
+
 def test_the_scored_pass_scores_each_frame_as_it_was_rendered_from_methods_that_reuse_their_buffer():
     """The scored pass keeps its images in a store per method, made once (a copy a frame grew the heap between the
     methods' frames and slowed every method's frames in that pass: docs/performance.md); each frame is scored as it

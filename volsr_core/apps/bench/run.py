@@ -14,7 +14,7 @@ run, interleaved frame by frame (the order rotating per frame, so machine noise 
 all of them :mod:`volsr_core.runtime.methods`.
 
 Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per
-pixel, :func:`render_supersampled`) by PSNR and SSIM (scikit-image; the scored pass's images are kept and scored
+pixel, :func:`render_supersampled`; rendered for the scored frames alone) by PSNR and SSIM (scikit-image; the scored pass's images are kept and scored
 after it, on every core, so no scoring runs between the methods' frames; they are kept in one store per method, one
 block allocated at its first scored frame: a copy allocated anew per frame grew the memory the methods take their
 images from between their frames, and in that pass alone every method's frames took longer, by about 17 ms at 1024²
@@ -222,11 +222,11 @@ def bench_one(bench_volume: BenchVolume, caster: RayCaster, size: tuple[int, int
     from volsr_core.temporal.ground_truth import supersampled_truth
 
     width, height = size
-    truth = []
-    for t, camera in enumerate(cameras):
+    truth = {}  # frame -> its ground truth, for the scored frames alone (the warm-up's would go unused)
+    for t, camera in enumerate(cameras[warmup:], start=warmup):
         image = supersampled_truth(caster, camera, t, width, height, reference_spp,
                                    on_device=caster.device == "cuda")  # on a GPU summed there, one copy back
-        truth.append(to_host(image)[0])
+        truth[t] = to_host(image)[0]
         if progress is not None:
             progress.update()
     records = [{"render": [], "network": [], "readback": [], "psnr": [], "ssim": [], "passes": []} for _ in methods]
@@ -328,7 +328,7 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
     volumes_ = [load_bench_volume(spec, preset, placement) for spec in specs]
     n_methods = len(spp) + len(factors) + len(scales) + len(rows_of_models) + (vtk is not None)
     rows: list[dict[str, Any]] = []
-    renders = len(volumes_) * frames * (1 + n_methods * timing_passes)
+    renders = len(volumes_) * (frames - warmup + frames * n_methods * timing_passes)  # the truth's, the methods'
     with tqdm(total=renders, desc="bench", unit="render", disable=not progress) as bar:
         for bench_volume in volumes_:
             bar.set_postfix_str(bench_volume.name)
