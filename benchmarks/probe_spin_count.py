@@ -22,6 +22,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+OUT = Path(__file__).resolve().parents[1] / "out"  # the repository's out/, whatever the working directory
 DATA = Path(os.environ.get("VOLSR_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 
 
@@ -43,7 +44,7 @@ def main() -> None:
     parser.add_argument("--spincounts", default="300000,100000,10000,0",
                         help="GOMP_SPINCOUNT values, the first the one the others are compared with")
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--out", type=Path, default=Path("out/probe_spin"))
+    parser.add_argument("--out", type=Path, default=OUT / "probe_spin")
     args = parser.parse_args()
     settings = args.spincounts.split(",")
     volume = args.volume if Path(args.volume.split(":")[0]).exists() else str(DATA / "volumes" / args.volume)

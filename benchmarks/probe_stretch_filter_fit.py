@@ -17,12 +17,11 @@ against the shipped one, each run by ``Pipeline(..., stretch=2)``.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 import torch
 import torch.nn.functional as F
-from bench_taau import orbit_parser, orbit_scene
+from bench_taau import REPO, orbit_parser, orbit_scene
 from tqdm import tqdm
 
 from volsr_core.runtime.models import model_file
@@ -34,7 +33,7 @@ from volsr_core.sr.metrics import psnr_ssim
 from volsr_core.sr.network import second_orientation
 from volsr_core.temporal.ground_truth import supersampled_truth
 
-WEIGHTS = Path("out/probe_stretch_filter_fit.npy")
+WEIGHTS = REPO / "out" / "probe_stretch_filter_fit.npy"
 WARMUP = 4
 
 
@@ -115,7 +114,7 @@ def bench(args: argparse.Namespace) -> None:
 def main() -> None:
     parser = orbit_parser(__doc__.split("\n\n")[0])
     parser.add_argument("mode", nargs="?", choices=("fit", "bench"), default="fit")
-    parser.add_argument("--data", default="out/dataset_motion")
+    parser.add_argument("--data", default=str(REPO / "out" / "dataset_motion"))
     parser.add_argument("--kernel", type=int, default=5)
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--weights", default=str(WEIGHTS))

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
-from bench_taau import DATA, interleaved
+from bench_taau import DATA, REPO, interleaved
 from probe_stretch_kernel import VOLUMES
 from tqdm import tqdm
 
@@ -68,7 +68,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="256,512")
     parser.add_argument("--degrees", default="2,3,4,5")
-    parser.add_argument("--out", type=Path, default=Path("out/stretch_speed"))
+    parser.add_argument("--out", type=Path, default=REPO / "out" / "stretch_speed")
     args = parser.parse_args()
     runs = [(spec, int(size), float(degrees)) for spec in VOLUMES for size in args.sizes.split(",")
             for degrees in args.degrees.split(",")]

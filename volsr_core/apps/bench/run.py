@@ -13,18 +13,17 @@ run, interleaved frame by frame (the order rotating per frame, so machine noise 
 
 all of them :mod:`volsr_core.runtime.methods`.
 
-Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per
-pixel, :func:`render_supersampled`; rendered for the scored frames alone) by PSNR and SSIM (scikit-image; the scored pass's images are kept and scored
-after it, on every core, so no scoring runs between the methods' frames; they are kept in one store per method, one
-block allocated at its first scored frame: a copy allocated anew per frame grew the memory the methods take their
-images from between their frames, and in that pass alone every method's frames took longer, by about 17 ms at 1024²
-on a run's first volume; docs/performance.md, "The scored pass timed its own bookkeeping"). Quality is averaged over
-the frames after
-``warmup`` warm-up frames; times are medians over the same frames of ``timing_passes`` passes over the orbit: the
-scored one and ``timing_passes - 1`` more with fresh methods (their histories empty again), timed and not scored
-(the warm-up also absorbs kernel compilation). A method's time on this 2-core machine moves by 10-40% from frame to
-frame (the orbit's views and the machine alike), so the median of one pass's 8 frames moved the margins by up to 1.2
-dB between runs at 1024² (docs/performance.md).
+Each is compared with a supersampled native ground truth (``reference_spp`` Halton samples per pixel,
+:func:`render_supersampled`; rendered for the scored frames alone) by PSNR and SSIM (scikit-image; the scored pass's
+images are kept and scored after it, on every core, so no scoring runs between the methods' frames; they are kept in
+one store per method, one block allocated at its first scored frame: a copy allocated anew per frame grew the memory
+the methods take their images from between their frames, and in that pass alone every method's frames took longer,
+by about 17 ms at 1024² on a run's first volume; docs/performance.md, "The scored pass timed its own bookkeeping").
+Quality is averaged over the frames after ``warmup`` warm-up frames; times are medians over the same frames of
+``timing_passes`` passes over the orbit: the scored one and ``timing_passes - 1`` more with fresh methods (their
+histories empty again), timed and not scored (the warm-up also absorbs kernel compilation). A method's time on this
+2-core machine moves by 10-40% from frame to frame (the orbit's views and the machine alike), so the median of one
+pass's 8 frames moved the margins by up to 1.2 dB between runs at 1024² (docs/performance.md).
 ``ms_render`` is the ray casting, ``ms_network`` what follows it (TAAU and the network for VolSR, the bilinear or
 TAAU upscaling for those, 0 for native), ``ms_total`` their sum; ``ms_total_passes`` each pass's median.
 On ``device="cuda"`` every method makes its full-size image on the GPU and its times end when the GPU is done;
