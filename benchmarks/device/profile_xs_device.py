@@ -14,7 +14,8 @@ host's, and fewer or fused launches are the lever; where it is near the step, th
 ``OUT/profile_xs.md`` (a table per volume) and ``OUT/profile_xs.json``.
 
 On the lent H200 (docs/performance-gpu.md, "Sixth lease") XS 2x's step took 2.7-3.1 ms at 2048² where the
-baseline's bilinear stretch took 0.6-1.0. Volumes are ``gpu_bench.py pack`` records (``--volumes``); ``--names
+baseline's bilinear stretch took 0.6-1.0; this script's first run ("Seventh lease") found the filter pair's per-pixel
+kernel 0.96 ms of the step's 1.4 ms of kernels. Volumes are ``gpu_bench.py pack`` records (``--volumes``); ``--names
 phantom`` renders the embedded phantom, and ``NUMBA_ENABLE_CUDASIM=1 ... --names phantom --size 32 --frames 6
 --repeats 2`` runs the script in numba's CUDA simulator, to check it, not to time anything.
 """
