@@ -102,7 +102,7 @@ def _second_picked(smoothing, across):
 
 
 @functools.cache
-def filter_pixel(taps: int, pair: bool):
+def _filter_pixel(taps: int, pair: bool):
     """The device function that writes ``out[y, x]`` (H, W, 3) for a k x k filter (k = ``taps``), or a ``pair``:
     per channel the bias plus the taps of the clipped, edge-repeated image through ``weights``, the flat (n, 3, k, k)
     array (n = 2 for a pair), ``bias`` the flat (n, 3); for a pair, blended into filter 1 by ``pick`` (0 or 1: both
@@ -157,7 +157,7 @@ def _compiled(taps: int, pair: bool, weight_bytes: bytes, bias_bytes: bytes):
     """:func:`filter_kernel` for the flat float32 weights and biases as bytes (the cache's key)."""
     flat_weights = np.frombuffer(weight_bytes, dtype=np.float32).copy()
     flat_bias = np.frombuffer(bias_bytes, dtype=np.float32).copy()
-    write = filter_pixel(taps, pair)
+    write = _filter_pixel(taps, pair)
     if not pair:
         @cuda.jit
         def single(image, low, high, out):
