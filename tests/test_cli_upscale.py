@@ -210,11 +210,37 @@ def test_an_interrupted_run_leaves_complete_files_only(tmp_path, model, small_vo
 def test_auto_variant_rule(capsys):
     assert batch.choose_variant({"L": 90, "M": 40, "S": 10}, budget_ms=50) == "M"
     assert batch.choose_variant({"L": 49, "M": 40, "S": 10}, budget_ms=50) == "L"
-    assert batch.choose_variant({"L": 90, "M": 60, "S": 55}, budget_ms=50) == "S"  # none fits: S
-    assert batch.choose_variant({"M": 60}, budget_ms=50) == "S"
+    assert batch.choose_variant({"L": 90, "M": 60, "S": 55}, budget_ms=50) == "S"  # none fits: the fastest
+    assert batch.choose_variant({("S", 1): 60, ("M", 2): 70, ("XS", 2): 65}, budget_ms=50) == ("S", 1)
     with pytest.raises(SystemExit):
         build_parser().parse_args(["upscale", "--help"])
     assert "half the time of one LR render" in " ".join(capsys.readouterr().out.split())
+
+
+def test_variant_auto_where_no_model_ships_takes_a_stretched_one(tmp_path, monkeypatch, small_volume, capsys):
+    """At 16x, where no model ships, ``--variant auto`` times the shipped 8x, 4x and 2x models (stretched 2x, 4x and
+    8x), the whole scale's first and each scale's larger variants first, and runs the first whose network fits half
+    the LR render, else the fastest: the times measured here decide what it must have taken."""
+    measured: dict[str, float] = {}
+    network_ms, render_ms = batch.network_ms, batch.render_ms
+    monkeypatch.setattr(batch, "network_ms", lambda engine, *a: measured.setdefault(engine.path.name,
+                                                                                   network_ms(engine, *a)))
+    monkeypatch.setattr(batch, "render_ms", lambda *a: measured.setdefault("lr render", render_ms(*a)))
+    code = main(["upscale", str(small_volume), "--variant", "auto", "--scale", "16", "--orbit", "1", "--size", "64",
+                 "--out", str(tmp_path / "out")])
+    assert code == 0
+    out = capsys.readouterr().out
+    budget = models.PAYING_NETWORK_SHARE * measured.pop("lr render")
+    shipped = {(e["variant"], e["scale"]): e["files"]["onnx"] for e in models.shipped_models()}
+    order = [shipped[v, m] for m in (8, 4, 2) for v in ("L", "M", "S", "XS") if (v, m) in shipped]
+    timed = list(measured)
+    assert timed == order[:len(timed)], "timed in the rule's order"
+    fits = [name for name in timed if measured[name] <= budget]
+    assert fits in ([], timed[-1:]), "timing stops at the first that fits"
+    chosen = fits[0] if fits else min(timed, key=measured.get)
+    model_scale = int(chosen.split("-")[-1].split("x")[0])
+    assert f"with {chosen}" in out and f"stretched {16 // model_scale}x" in out
+    assert np.asarray(Image.open(tmp_path / "out" / "small" / "frame_0000.png")).shape == (64, 64, 3)
 
 
 @pytest.fixture(scope="module")
@@ -253,9 +279,9 @@ def test_variant_auto_picks_from_the_shipped_registry(tmp_path, monkeypatch, reg
     monkeypatch.setattr(batch, "render_ms", lambda *a: measured.setdefault("lr render", render_ms(*a)))
     chosen, out = run_auto(tmp_path, small_volume, capsys)
     m_fits = measured["m4.onnx"] <= models.PAYING_NETWORK_SHARE * measured["lr render"]
-    assert chosen == ("M" if m_fits else "S")
+    assert chosen == ("M 4x" if m_fits else "S 4x")
     assert ("s4.onnx" in measured) is not m_fits, "S is timed only when M does not fit"
-    assert f"with {chosen.lower()}4.onnx" in out
+    assert f"with {chosen[0].lower()}4.onnx" in out
 
 
 @pytest.mark.parametrize("budget, expected", [(50.0, "M"), (40.0, "M"), (39.0, "S")])
@@ -266,7 +292,7 @@ def test_variant_auto_takes_the_largest_that_fits_the_budget(tmp_path, monkeypat
     monkeypatch.setattr(batch, "network_ms", lambda engine, *a: {"m4.onnx": 40.0, "s4.onnx": 10.0}[engine.path.name])
     monkeypatch.setattr(batch, "render_ms", lambda caster, camera, size: 2 * budget if size == (8, 8) else 0.0)
     chosen, out = run_auto(tmp_path, small_volume, capsys)
-    assert chosen == expected and f"with {expected.lower()}4.onnx" in out
-    times = "M 40 ms" if expected == "M" else "M 40 ms, S 10 ms"
+    assert chosen == f"{expected} 4x" and f"with {expected.lower()}4.onnx" in out
+    times = "M 4x 40 ms" if expected == "M" else "M 4x 40 ms, S 4x 10 ms"
     assert (f"network per 32x32 frame {times}; budget {budget:.0f} ms (0.5 of the 8x8 LR render, {2 * budget:.0f} ms)"
-            f" -> {expected}") in out
+            f" -> {expected} 4x") in out

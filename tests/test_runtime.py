@@ -334,6 +334,12 @@ def test_stretch_auto_picks_by_the_views_pixels_per_voxel_at_each_new_history():
         eight = Pipeline(volume, tf, scale=8, stretch="auto", variant=variant, size=(64, 64))
         assert (eight.auto_stretch, eight.stretch, eight.engine.path.name) == (False, 2, "volsr-XS-4x.onnx")
     assert Pipeline(volume, tf, scale=8, stretch="auto", variant="S", size=(64, 64)).auto_stretch
+    # at 16x, where no model ships, the largest scale below at which the variant ships, stretched
+    for variant, stretch, name in ((None, 4, "volsr-XS-4x.onnx"), ("XS", 4, "volsr-XS-4x.onnx"),
+                                   ("S", 2, "volsr-S-8x.onnx")):
+        sixteen = Pipeline(volume, tf, scale=16, stretch="auto", variant=variant, size=(64, 64))
+        assert (sixteen.auto_stretch, sixteen.stretch, sixteen.engine.path.name) == (False, stretch, name)
+        assert sixteen.render(wide).shape == (64, 64, 3) and sixteen.low_resolution_size == (4, 4)
     with pytest.raises(ValueError, match="'auto' or a whole number"):
         Pipeline(volume, tf, scale=4, stretch="twice")
 

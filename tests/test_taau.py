@@ -50,8 +50,10 @@ def test_a_constant_image_stays_constant_under_any_motion_and_jitter():
         np.testing.assert_allclose(out, 0.37, atol=1e-5)
 
 
-@pytest.mark.parametrize("scale", [2, 4])
+@pytest.mark.parametrize("scale", [2, 4, 8, 16])
 def test_a_still_camera_converges_towards_the_box_filtered_image(scale):
+    """At 8x and 16x a still view's narrow splat falls below float32's range far from the samples: the nearest sample
+    takes the weight there (``SPLAT_FLOOR``), where the sums made NaN that spread through the history."""
     lr_size = 64 // scale
     ref = truth(64)
     up = TemporalUpsampler(scale)
@@ -60,6 +62,7 @@ def test_a_still_camera_converges_towards_the_box_filtered_image(scale):
     for k in range(8 * scale * scale):
         jitter = halton_jitter(k, jitter_phases(scale))
         out = up(lr_frame(lr_size, scale, jitter), still, jitter, rotation=0.0)
+        assert np.isfinite(out).all()
         scores.append(psnr(out[8:-8, 8:-8], ref[8:-8, 8:-8]))
     print(f"x{scale}: first frame {scores[0]:.1f} dB, last {scores[-1]:.1f} dB")
     assert scores[-1] > scores[0] + 6.0

@@ -192,10 +192,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 # -- volsr upscale --------------------------------------------------------------------------------
 AUTO_VARIANT_RULE = ("auto: the largest shipped variant at --scale (L > M > S > XS) whose network time for one frame "
-                     "of --size (measured at start-up: one warm-up, then the median of 3 runs on zeros) is at most "
+                     "(measured at start-up: one warm-up, then the median of 3 runs on zeros) is at most "
                      "half the time of one LR render (1/--scale of --size) of the first camera of the first input, "
-                     "so that it buys more than rendering more pixels in the same time would; the smallest shipped "
-                     "when none is")
+                     "so that it buys more than rendering more pixels in the same time would; where none is, the "
+                     "same at --scale / 2 with the model's image stretched 2x, then / 4 stretched 4x, ... (unless "
+                     "--stretch K is given: only K); the fastest timed when none fits")
 
 
 def cmd_upscale(args: argparse.Namespace) -> int:
@@ -232,8 +233,8 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     model, variant, stretch = None, args.variant, args.stretch
     if stretch == "auto" and (args.model or args.budget_ms is not None or variant == "auto"):
         stretch = 1  # a model file upscales by its own scale; the frame budget and --variant auto choose their own
-    elif stretch == "auto" and auto_stretches(args.scale, variant) == (2,):
-        stretch = 2  # nothing to choose: the half-size model, stretched (8x: XS 4x + bicubic 2x)
+    elif stretch == "auto" and len(auto_stretches(args.scale, variant)) == 1:
+        stretch = auto_stretches(args.scale, variant)[0]  # nothing to choose (8x: XS 4x + bicubic 2x; 16x: 4x)
     k = 1 if stretch == "auto" else stretch  # the stretch the model is checked for ("auto": the unstretched one)
     if args.scale is not None and args.scale % k:
         raise InputError("--stretch", f"{k} does not divide --scale {args.scale}")
@@ -285,9 +286,11 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                 pipeline = BudgetRenderer(volume, tf, args.budget_ms, size=args.size, device=args.device,
                                           sample_distance=args.sample_distance, background=args.background)
             else:
-                if model is None:  # --variant auto, decided once at the first input that loads, at the model's size
-                    model_size = (-(-args.size[0] // k), -(-args.size[1] // k))
-                    variant, model = batch.auto_variant(caster, cameras[0], model_size, scale, device=args.device)
+                if model is None:  # --variant auto, decided once at the first input that loads: the model and stretch
+                    whole = scale * k  # --stretch auto: the rule chooses the stretch too, else the one given
+                    variant, model, k = batch.auto_variant(caster, cameras[0], args.size, whole, device=args.device,
+                                                           stretches=None if args.stretch == "auto" else [k])
+                    scale, stretch = whole // k, k
                 # --stretch auto: the pipeline opens the shipped models it may choose between by itself
                 pipeline = Pipeline(volume, tf, None if stretch == "auto" else model, scale=scale * k,
                                     size=args.size, variant=variant, device=args.device,

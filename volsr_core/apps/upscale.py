@@ -8,7 +8,7 @@
 - with ``reference_spp`` it also measures PSNR against an N-spp native render of every frame;
 - :func:`auto_variant` picks the largest shipped variant whose network costs at most
   :data:`~volsr_core.runtime.models.PAYING_NETWORK_SHARE` of an LR render (:func:`choose_variant`
-  is the rule).
+  is the rule), at the whole scale or, stretched, at a part of it.
 
 Every PNG and MP4 is written atomically (a temporary name in the same folder, then a rename), so
 an interrupted run leaves complete files or none; the next run into the same folder deletes what a
@@ -24,7 +24,7 @@ import statistics
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -113,15 +113,10 @@ def video_paths(video: str | os.PathLike | None, names: Sequence[str]) -> dict[s
 
 
 # -- the --variant auto rule ------------------------------------------------------------------------
-def choose_variant(network_ms: Mapping[str, float], budget_ms: float, fallback: str = "S") -> str:
-    """The largest variant (L > M > S > XS) whose network time per frame is at most ``budget_ms``.
-
-    ``network_ms`` maps the variants measured to their ms per frame; when none fits, ``fallback``.
-    """
-    for variant in VARIANTS_LARGEST_FIRST:
-        if variant in network_ms and network_ms[variant] <= budget_ms:
-            return variant
-    return fallback
+def choose_variant(network_ms: Mapping[Any, float], budget_ms: float) -> Any:
+    """The first candidate of ``network_ms`` (candidate -> ms per frame, in the order they are preferred: the larger
+    variant first) whose network time per frame is at most ``budget_ms``; when none is, the fastest."""
+    return next((c for c, ms in network_ms.items() if ms <= budget_ms), min(network_ms, key=network_ms.get))
 
 
 def network_ms(engine, low_resolution_size: tuple[int, int], repeats: int = 3) -> float:
@@ -152,34 +147,44 @@ def render_ms(caster, camera, size: tuple[int, int]) -> float:
 
 
 def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: str = "cpu",
-                 log: Callable[[str], None] = print) -> tuple[str, Path]:
-    """The shipped variant ``--variant auto`` takes, and its model file.
+                 stretches: Sequence[int] | None = None, log: Callable[[str], None] = print) -> tuple[str, Path, int]:
+    """The shipped variant ``--variant auto`` takes, its model file and the stretch after it.
 
-    Budget: :data:`~volsr_core.runtime.models.PAYING_NETWORK_SHARE` of one LR render (``size / scale``,
-    1 spp) of ``camera``. The shipped variants at ``scale`` are timed largest first (:func:`network_ms`
-    on an LR frame) until one fits (:func:`choose_variant`); the smallest shipped one is the fallback.
+    ``scale`` is the whole factor from the LR frame to ``size``. Budget:
+    :data:`~volsr_core.runtime.models.PAYING_NETWORK_SHARE` of one LR render (``size / scale``, 1 spp) of ``camera``.
+    The candidates are the shipped models at ``scale`` / k for k = 1, 2, 4, ... (``stretches``: only those k; k
+    divides ``scale``, the model's image stretched by k bicubically, as ``Pipeline(stretch=k)`` does), the model of
+    the whole scale first, each scale's variants largest first; they are timed in that order (:func:`network_ms` on an
+    LR frame; the stretch not counted) until one fits, else the fastest (:func:`choose_variant`). So at 8x, where the
+    one 8x model is a U-Net, a CPU takes XS 4x stretched 2x, as ``volsr upscale --scale 8`` does by default.
     """
     from volsr_core.runtime.engines import open_engine
     from volsr_core.runtime.models import find_model, model_file, shipped_models
+    from volsr_core.runtime.pipeline import stretch_steps
 
-    shipped = {e["variant"] for e in shipped_models() if e["scale"] == scale}
-    candidates = [v for v in VARIANTS_LARGEST_FIRST if v in shipped]
+    shipped = {(e["variant"], e["scale"]) for e in shipped_models()}
+    stretches = stretches or stretch_steps(scale)
+    candidates = [(v, k) for k in stretches for v in VARIANTS_LARGEST_FIRST if (v, scale // k) in shipped]
     if not candidates:
-        find_model("S", scale)  # raises the one-line error naming what is shipped
+        find_model("S", scale // stretches[0])  # raises the one-line error naming what is shipped
     lr_size = (-(-size[0] // scale), -(-size[1] // scale))
     lr_ms = render_ms(caster, camera, lr_size)
     budget = PAYING_NETWORK_SHARE * lr_ms
-    measured: dict[str, float] = {}
-    for variant in candidates:
-        engine = open_engine(model_file(variant, scale), device=device)
-        measured[variant] = network_ms(engine, lr_size)
-        if measured[variant] <= budget:
+    measured: dict[tuple[str, int], float] = {}
+    for variant, k in candidates:
+        engine = open_engine(model_file(variant, scale // k), device=device)
+        measured[variant, k] = network_ms(engine, lr_size)
+        if measured[variant, k] <= budget:
             break
-    chosen = choose_variant(measured, budget, fallback=candidates[-1])
-    times = ", ".join(f"{v} {ms:.0f} ms" for v, ms in measured.items())
+    variant, k = choose_variant(measured, budget)
+
+    def named(v: str, stretch: int) -> str:
+        return f"{v} {scale // stretch}x" + (f" stretched {stretch}x" if stretch > 1 else "")
+
+    times = ", ".join(f"{named(v, s)} {ms:.0f} ms" for (v, s), ms in measured.items())
     log(f"variant auto: network per {size[0]}x{size[1]} frame {times}; budget {budget:.0f} ms "
-        f"({PAYING_NETWORK_SHARE:g} of the {lr_size[0]}x{lr_size[1]} LR render, {lr_ms:.0f} ms) -> {chosen}")
-    return chosen, model_file(chosen, scale)
+        f"({PAYING_NETWORK_SHARE:g} of the {lr_size[0]}x{lr_size[1]} LR render, {lr_ms:.0f} ms) -> {named(variant, k)}")
+    return variant, model_file(variant, scale // k), k
 
 
 # -- one input --------------------------------------------------------------------------------------

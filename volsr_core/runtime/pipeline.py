@@ -23,6 +23,7 @@ from volsr_core.runtime.upscaler import StatefulUpscaler
 from volsr_core.scene.camera import Camera
 from volsr_core.scene.transfer_function import TransferFunction
 from volsr_core.scene.volume import Volume
+from volsr_core.sr.network_config import VARIANTS
 from volsr_core.temporal.jitter import halton_jitter, jitter_phases
 from volsr_core.temporal.taau import view_rotation
 
@@ -66,7 +67,8 @@ class Pipeline(KeepsLastFrame):
       :func:`~volsr_core.temporal.taau.view_rotation` times it: about how far the volume moves in pixels) until that
       falls below :data:`FAST_TURN` [0], where the full-size model's history goes stale sooner than the stretched
       one's (docs/performance.md, "How fast the view turns"); else 1; both models opened up front, each change of
-      model starting its history afresh; otherwise 1;
+      model starting its history afresh; where the variant has no model at ``scale``, its model of the largest scale
+      below, stretched (8x: XS 4x stretched 2x, 16x: XS 4x stretched 4x; :func:`auto_stretches`); otherwise 1;
     - ``variant``: None: :func:`~volsr_core.runtime.models.default_variant`, the fastest shipped at
       ``scale`` (XS at 2x: the model that pays off on a CPU, docs/performance.md);
     - ``size``: output (width, height) in pixels; any size: the LR frame is ceil(size / scale)
@@ -214,22 +216,31 @@ class Pipeline(KeepsLastFrame):
 
 def auto_stretches(scale: int | None, variant: str | None) -> tuple[int, ...]:
     """The stretches ``stretch="auto"`` chooses between for the shipped models at ``scale`` (None: the default scale)
-    and ``variant`` (None: the default at each scale): 1 and, where ``scale`` is even and 4 or more and a shipped model
-    of the variant upscales half of it, 2; only 2 where the whole scale has no model of that variant (a named XS at
-    8x), or where no variant is named and the whole scale's default is another (8x: the one 8x model is a U-Net,
-    2.7-4.6 times as slow as XS 4x stretched at every point measured and below it in PSNR at 15 of 16:
-    docs/performance.md, "How fast the view turns")."""
-    if scale is None or scale < 4 or scale % 2:
+    and ``variant`` (None: the fastest variant, XS, wherever it ships): the least k of 1, 2, 4, ... (k divides
+    ``scale``, ``scale`` / k at least 2) at whose scale / k the variant ships, and with it 2k where k is 1 and the
+    variant ships at half the scale too (4x: XS 4x, or XS 2x stretched where the view asks for it). So a scale the
+    variant does not ship runs its model of the largest scale below, stretched: 8x XS 4x + bicubic 2x (the one 8x
+    model is a U-Net, 2.7-4.6 times as slow as XS 4x stretched at every point measured and below it in PSNR at 15 of
+    16: docs/performance.md, "How fast the view turns"), 16x XS 4x + bicubic 4x (docs/performance.md, "16x"); a
+    named variant that ships at no such scale gets (1,), whose model the pipeline then fails to find, naming what
+    ships."""
+    if scale is None or scale < 4:
         return (1,)
-    from volsr_core.runtime.models import default_variant, shipped_models
+    from volsr_core.runtime.models import shipped_models
 
-    half = scale // 2
-    wanted = (variant or default_variant(half)).upper()
     shipped = {(e["variant"], e["scale"]) for e in shipped_models()}
-    if (wanted, half) not in shipped:
-        return (1,)
-    whole = (variant or default_variant(scale)).upper()
-    return (1, 2) if whole == wanted and (wanted, scale) in shipped else (2,)
+    for wanted in [variant.upper()] if variant else VARIANTS:
+        ships = [k for k in stretch_steps(scale) if (wanted, scale // k) in shipped]
+        if ships:
+            least = ships[0]
+            return (1, 2) if least == 1 and 2 in ships else (least,)
+    return (1,)
+
+
+def stretch_steps(scale: int) -> list[int]:
+    """The stretches a model's image may take at ``scale`` (the whole factor from the LR frame to the output): 1, 2, 4,
+    ... where they divide ``scale`` and leave the model at least 2x."""
+    return [k for k in (2 ** i for i in range(scale.bit_length())) if scale % k == 0 and scale // k >= 2]
 
 
 def _stretches(stretch: int | str, scale: int | None, model: Any, variant: str | None) -> tuple[int, ...]:

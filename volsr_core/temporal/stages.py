@@ -12,7 +12,7 @@ builds its own.
 - ``sample_window``: along one axis, the LR samples around an HR pixel centre: the nearest, the two of the 2x2
   window, the fraction past the first and the two Gaussian weights (TAAU's step 1);
 - ``splat_weights``: the 2x2 splat's weights, its confidence and the factor that normalises it, Gaussian,
-  blended with the bilinear weights by ``tent``;
+  blended with the bilinear weights by ``tent``; the nearest sample alone where the Gaussian has vanished;
 - ``catmull_rom_weights``: the four Catmull-Rom weights at a fraction past the second tap (float32, as the
   history is); ``history_column`` and ``catmull_rom_mix``: a history column's vertical Catmull-Rom pass (RGB),
   and the horizontal pass over four of them;
@@ -33,6 +33,11 @@ from typing import Callable, NamedTuple
 
 import numba
 import numpy as np
+
+SPLAT_FLOOR = 1e-30
+"""The least confidence a splat keeps (``splat_weights``): its inverse and a quarter of it are ordinary float32 numbers,
+where the Gaussian weights of a still view's narrow splat (``still_sigma_hr`` / scale LR px) fall to 1e-98 at 16x and
+those of a static view's to 1e-60 at 8x, and the float32 sums made NaN of them."""
 
 
 class TemporalStages(NamedTuple):
@@ -89,10 +94,20 @@ def build_temporal_stages(jit: Callable) -> TemporalStages:
     def splat_weights(wy0, wy1, wx0, wx1, dy0, fx, tent):
         """The 2x2 splat's weights (w00, w01, w10, w11), its confidence ``a`` (the Gaussian weights' sum) and the
         factor ``inv`` that normalises the weighted sum: Gaussian, blended with the bilinear weights at (fx, dy0)
-        by ``tent``."""
+        by ``tent``. Where the Gaussian has all but vanished (``a`` below :data:`SPLAT_FLOOR`: the narrow splat of
+        a still view, far from the samples at 8x and more) the nearest sample takes the whole weight at that
+        least confidence, so the float32 sums neither overflow nor divide zero by zero."""
         w00, w01, w10, w11 = wy0 * wx0, wy0 * wx1, wy1 * wx0, wy1 * wx1
         a = w00 + w01 + w10 + w11
-        inv = 1.0 / a
+        if a < SPLAT_FLOOR:
+            below, right = dy0 >= 0.5, fx >= 0.5
+            w00 = 1.0 if not below and not right else 0.0
+            w01 = 1.0 if not below and right else 0.0
+            w10 = 1.0 if below and not right else 0.0
+            w11 = 1.0 if below and right else 0.0
+            a, inv = SPLAT_FLOOR, 1.0
+        else:
+            inv = 1.0 / a
         if tent > 0.0:
             keep = (1.0 - tent) * inv
             w00 = keep * w00 + tent * (1.0 - dy0) * (1.0 - fx)
