@@ -66,6 +66,22 @@ SCRIPT = textwrap.dedent("""
             close(f"layered {scale}x frame {t}", cpu(*args), gpu(*args).copy_to_host())
             close(f"layered {scale}x history {t}", cpu.history, gpu.history.copy_to_host())
 
+    # 16x on a pan and a static view: far from the samples the narrow splat's Gaussian underflows (SPLAT_FLOOR)
+    for name, cpu, gpu in (("TAAU", TemporalUpsampler(16, side_outputs=False), CudaTemporalUpsampler(16)),
+                           ("layered", LayeredUpsampler(16), CudaLayeredUpsampler(16))):
+        for t, (rotation, ppv, moves) in enumerate(views[3:]):
+            if name == "TAAU":
+                args = (rng.random((2, 2, 3), dtype=np.float32), np.zeros((2, 2, 2), np.float32), (0.25, -0.25),
+                        rng.random((2, 2), dtype=np.float32), rotation, ppv)
+            else:
+                slabs = np.zeros((2, 2, 2, 6), np.float32)
+                slabs[..., 3] = rng.random((2, 2, 2), dtype=np.float32)
+                slabs[..., :3] = slabs[..., 3:4] * rng.random((2, 2, 2, 3), dtype=np.float32)
+                args = (slabs, (0.25, -0.25), (0.1, 0.2, 0.3), rotation, ppv)
+            out = cpu(*args)
+            assert np.isfinite(out).all() and np.isfinite(cpu.history).all(), (name, t)
+            close(f"{name} 16x frame {t}", out, gpu(*args).copy_to_host())
+
     # within one block of the filter's, and over blocks whose tiles' halos lie inside the image and past its edges
     for h_image, w_image in ((9, 11), (19, 37)):
         image = (rng.random((h_image, w_image, 3), dtype=np.float32) * 1.4 - 0.2)  # beyond [0, 1]: the clip counts
@@ -247,7 +263,8 @@ def run_script(script: str) -> str:
 
 
 def test_cuda_temporal_kernels_match_the_cpu_kernels():
-    assert run_script(SCRIPT).count("max abs difference") == 2 * 2 * 2 * 5 + 2 * 2 * 2
+    # TAAU and layered at 2x and 4x (frame and history, 5 views), both at 16x (2 views), the filters
+    assert run_script(SCRIPT).count("max abs difference") == 2 * 2 * 2 * 5 + 2 * 2 + 2 * 2 * 2
 
 
 def test_the_xs_pipeline_on_the_device_gives_the_cpu_pipelines_images():
