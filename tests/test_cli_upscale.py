@@ -138,6 +138,8 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path, model, capsys):
     assert "--slabs: --budget-ms runs each model with its own depth slabs" in capsys.readouterr().err
     assert main(["upscale", "--scale", "4", "--stretch", "3", "--out", str(tmp_path)]) == 2
     assert "--stretch: 3 does not divide --scale 4" in capsys.readouterr().err
+    assert main(["upscale", "--scale", "4", "--stretch", "4", "--out", str(tmp_path)]) == 2
+    assert "--stretch: 4 leaves the model no upscaling at --scale 4" in capsys.readouterr().err
     assert main(["upscale", "--stretch", "2", "--budget-ms", "50", "--out", str(tmp_path)]) == 2
     assert "--stretch: --budget-ms chooses its own levels" in capsys.readouterr().err
     assert main(["upscale", "--model", str(model), "--scale", "4", "--stretch", "2", "--out", str(tmp_path)]) == 2

@@ -238,6 +238,8 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     k = 1 if stretch == "auto" else stretch  # the stretch the model is checked for ("auto": the unstretched one)
     if args.scale is not None and args.scale % k:
         raise InputError("--stretch", f"{k} does not divide --scale {args.scale}")
+    if args.scale is not None and args.scale // k < 2:
+        raise InputError("--stretch", f"{k} leaves the model no upscaling at --scale {args.scale} (at most half)")
     if k > 1 and args.budget_ms is not None:
         raise InputError("--stretch", "--budget-ms chooses its own levels; give --stretch without it")
     scale = None if args.scale is None else args.scale // k  # the model's
