@@ -295,7 +295,7 @@ def test_a_stretched_pipeline_is_the_model_at_a_smaller_size_then_bicubic():
     assert image.std() > 0.01
     assert stretched.last_timings["network_ms"] > 0
     assert VolSR(stretched, "XS").label == "VolSR XS 2x + bicubic 2x" and VolSR(stretched, "XS").scale == 4
-    with pytest.raises(ValueError, match="divides the scale, got 3 for 4x"):
+    with pytest.raises(ValueError, match="divides the scale and leaves the model at least 2x, got 3 for 4x"):
         Pipeline(volume, tf, scale=4, stretch=3, variant="XS")
     assert Pipeline(volume, tf, stretch=2, variant="XS").scale == 4, "no scale: the shipped default's, stretched"
 
@@ -340,6 +340,8 @@ def test_stretch_auto_picks_by_the_views_pixels_per_voxel_at_each_new_history():
         sixteen = Pipeline(volume, tf, scale=16, stretch="auto", variant=variant, size=(64, 64))
         assert (sixteen.auto_stretch, sixteen.stretch, sixteen.engine.path.name) == (False, stretch, name)
         assert sixteen.render(wide).shape == (64, 64, 3) and sixteen.low_resolution_size == (4, 4)
+    with pytest.raises(ValueError, match="leaves the model at least 2x, got 4 for 4x"):
+        Pipeline(volume, tf, scale=4, stretch=4)
     with pytest.raises(ValueError, match="'auto' or a whole number"):
         Pipeline(volume, tf, scale=4, stretch="twice")
 

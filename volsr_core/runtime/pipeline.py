@@ -248,9 +248,9 @@ def _stretches(stretch: int | str, scale: int | None, model: Any, variant: str |
     model)."""
     if stretch == "auto":
         return (1,) if model is not None else auto_stretches(scale, variant)
-    if not isinstance(stretch, int) or stretch < 1 or (scale is not None and scale % stretch):
-        raise ValueError(f"the stretch must be 'auto' or a whole number >= 1 that divides the scale, got {stretch!r}"
-                         + ("" if scale is None else f" for {scale}x"))
+    if not isinstance(stretch, int) or stretch < 1 or (scale is not None and (scale % stretch or scale < 2 * stretch)):
+        raise ValueError("the stretch must be 'auto' or a whole number >= 1 that divides the scale and leaves the "
+                         f"model at least 2x, got {stretch!r}" + ("" if scale is None else f" for {scale}x"))
     return (stretch,)
 
 
