@@ -399,8 +399,9 @@ def add_upscale_parser(sub) -> None:
                     "(1024² on the benchmark volumes; docs/performance.md, 'Where the history lives') [auto: 2 at an "
                     "even --scale of 4 or more where a voxel of the view spans at least two output pixels (judged at "
                     "each new history) or while the view turns fast for its sampling (3.5 degrees a frame times its "
-                    "pixels per voxel, until under 2.5), else 1; 2 at --scale 8 without --variant (XS 4x stretched); "
-                    "1 with --model, --variant auto or --budget-ms]")
+                    "pixels per voxel, until under 2.5), else 1; where the variant has no model at --scale, its "
+                    "model of the largest scale below (--scale 8: XS 4x stretched 2x, 16: 4x); 1 with --model or "
+                    "--budget-ms; with --variant auto that rule chooses]")
     up.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                     help="where rays are cast and the network runs; on cuda an XS model's TAAU and filter run there "
                     "too and one image per frame comes back [cpu]")
