@@ -280,7 +280,8 @@ def summary_markdown(summaries: Sequence[InputSummary], scale: str, model: str, 
             ms = statistics.median(values)
             ratio = f"{ms / statistics.median(native):.2f}" if native else "-"
             psnr = f"{np.mean(s.psnr[method]):.2f}" if method in s.psnr else "-"
-            lines.append(f"| {s.name} | {s.frames} | {s.size[0]}x{s.size[1]} | {method} | {ms:.1f} | {ratio} | {psnr} |")
+            size = f"{s.size[0]}x{s.size[1]}"
+            lines.append(f"| {s.name} | {s.frames} | {size} | {method} | {ms:.1f} | {ratio} | {psnr} |")
     reference = next((s.reference_spp for s in summaries if s.reference_spp), 0)
     if reference:
         lines += ["", f"PSNR against the native render of every frame with {reference} samples per pixel."]
