@@ -170,7 +170,7 @@ PIPELINE = textwrap.dedent("""
 
     volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
     cameras = orbit(Camera.framing(volume.bounds), 3, degrees=3.0)
-    for scale, size, stretch in ((2, (18, 14), 1), (4, (36, 28), 1), (4, (36, 28), 2)):
+    for scale, size, stretch in ((2, (18, 14), 1), (4, (36, 28), 1), (4, (36, 28), 2), (16, (96, 64), 4)):
         cpu = Pipeline(volume, get_preset("CT-Phantom"), scale=scale, variant="XS", size=size, stretch=stretch)
         gpu = Pipeline(volume, get_preset("CT-Phantom"), scale=scale, variant="XS", size=size, stretch=stretch,
                        device="cuda")
@@ -269,10 +269,10 @@ def test_cuda_temporal_kernels_match_the_cpu_kernels():
 
 def test_the_xs_pipeline_on_the_device_gives_the_cpu_pipelines_images():
     """VolSR XS with ``device="cuda"``: frame, TAAU (2x) or layered TAAU (4x) and filter on the device (and the
-    stretch of XS 2x + bicubic 2x), one image back; the images of the CPU pipeline, frame by frame, and the LR frame
-    there when asked for; once its histories swap, the upscaler makes one device array a frame (the filter's output)
-    and uploads nothing."""
-    assert run_script(PIPELINE).count("max abs difference") == 3 * 3
+    stretch of XS 2x + bicubic 2x, and of XS 4x + bicubic 4x at 16x), one image back; the images of the CPU pipeline,
+    frame by frame, and the LR frame there when asked for; once its histories swap, the upscaler makes one device
+    array a frame (the filter's output) and uploads nothing."""
+    assert run_script(PIPELINE).count("max abs difference") == 4 * 3
 
 
 def test_every_method_on_a_cuda_caster_makes_the_cpu_images_on_the_device():
