@@ -233,8 +233,8 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     model, variant, stretch = None, args.variant, args.stretch
     if stretch == "auto" and (args.model or args.budget_ms is not None or variant == "auto"):
         stretch = 1  # a model file upscales by its own scale; the frame budget and --variant auto choose their own
-    elif stretch == "auto" and len(auto_stretches(args.scale, variant)) == 1:
-        stretch = auto_stretches(args.scale, variant)[0]  # nothing to choose (8x: XS 4x + bicubic 2x; 16x: 4x)
+    elif stretch == "auto" and len(only := auto_stretches(args.scale, variant)) == 1:
+        stretch = only[0]  # nothing to choose (8x: XS 4x + bicubic 2x; 16x: 4x)
     k = 1 if stretch == "auto" else stretch  # the stretch the model is checked for ("auto": the unstretched one)
     if args.scale is not None and args.scale % k:
         raise InputError("--stretch", f"{k} does not divide --scale {args.scale}")
