@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 from typing import Callable
 
@@ -60,6 +61,11 @@ def _over_same_size(r: dict, found: dict[str, dict]) -> str:
     return f"{r['psnr'] - same['psnr']:+.2f}" if same else "–"
 
 
+def _is_s_model(label: str, scale: int) -> bool:
+    """Whether ``label`` is VolSR S at ``scale``, unstretched, on TAAU or in depth slabs ("VolSR S 4x in 2 slabs")."""
+    return re.fullmatch(rf"VolSR S {scale}x( in \d+ slabs)?", label) is not None
+
+
 def run_table(results: dict) -> list[str]:
     """The markdown lines of one run's table."""
     s = results["settings"]
@@ -85,11 +91,11 @@ def run_table(results: dict) -> list[str]:
     for label in (lb for lb in labels if lb.startswith("VolSR XS")):
         line(f"{label}: ms for +{TARGET_MARGIN_DB} dB at its PSNR (its ms)", of(label, _time_needed))
     for label in labels:
-        if label.startswith(("TAAU", "VolSR XS")) or label == "VolSR S 4x":  # the U-Nets' gain: one stands for them
+        if label.startswith(("TAAU", "VolSR XS")) or _is_s_model(label, 4):  # the U-Nets' gain: one stands for them
             line(f"{label} − same LR size + bilinear", of(label, _over_same_size))
     factors = sorted({found[label]["scale"] for found in scenes.values() for label in labels if label in found})
     for factor in factors:
-        at = [label for label in labels if label.startswith(("TAAU", "VolSR XS")) or label == f"VolSR S {factor}x"]
+        at = [label for label in labels if label.startswith(("TAAU", "VolSR XS")) or _is_s_model(label, factor)]
         at = [label for label in at if any(found.get(label, {}).get("scale") == factor for found in scenes.values())]
         native = f"native 1/{factor} size + bilinear"
         line(f"1/{factor} size, ms after the LR render: {' / '.join(at)}",

@@ -34,6 +34,18 @@ def small_volume(tmp_path_factory):
     return path
 
 
+def one_layer_u_net(path):
+    """A small U-Net on the one-layer TAAU (no ``taau_slabs``), exported to ``path``: a model that takes no depth
+    slabs."""
+    pytest.importorskip("torch")
+    from volsr_core.runtime.export import export_onnx
+    from volsr_core.sr.network import SuperResolutionNet
+    from volsr_core.sr.network_config import NetworkConfig
+
+    config = NetworkConfig(scale=4, previous_frames=0, fold=4, widths=(8, 12), taau_base=True)
+    return export_onnx(SuperResolutionNet(config), path, example_size=(8, 12))
+
+
 def leftovers(folder):
     """Temporary or partial files anywhere under ``folder``."""
     return [p for p in folder.rglob("*") if p.name.startswith(".") or ".part" in p.name]
@@ -132,8 +144,9 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path, model, capsys):
     assert main(["upscale", "--model", str(model), "--out", str(blocker)]) == 2
     assert main(["upscale", "--model", str(model), "--out", str(tmp_path), "--video", str(blocker / "x.mp4")]) == 2
     assert "exists and is not a folder" in capsys.readouterr().err
-    assert main(["upscale", "--model", str(model), "--slabs", "2", "--out", str(tmp_path)]) == 2
-    assert "volsr-S-4x.onnx: takes no depth slabs (--slabs 2)" in capsys.readouterr().err
+    one_layer = one_layer_u_net(tmp_path / "one_layer.onnx")  # every shipped U-Net refines the layered TAAU
+    assert main(["upscale", "--model", str(one_layer), "--slabs", "2", "--out", str(tmp_path)]) == 2
+    assert "one_layer.onnx: takes no depth slabs (--slabs 2)" in capsys.readouterr().err
     assert main(["upscale", "--slabs", "1", "--budget-ms", "50", "--out", str(tmp_path)]) == 2
     assert "--slabs: --budget-ms runs each model with its own depth slabs" in capsys.readouterr().err
     assert main(["upscale", "--scale", "4", "--stretch", "3", "--out", str(tmp_path)]) == 2

@@ -215,6 +215,40 @@ def test_a_network_with_taau_side_outputs_takes_seven_history_channels_and_start
         variant_config("S", 4, 0, taau_aux=True)
 
 
+def test_a_u_net_trained_on_the_layered_taau_runs_on_its_depth_slabs_and_starts_as_it(tmp_path):
+    """A U-Net with ``taau_slabs`` (its residual zero: the output is its base) renders each frame in its depth slabs
+    and refines the layered TAAU's estimate of them, frame by frame, from its ONNX file, as the layered TAAU run
+    beside it on the same frames gives (to float rounding); such a network takes no side outputs, and a U-Net not
+    trained on slabs is refused them."""
+    from volsr_core.io import make_phantom
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.scene import Volume, get_preset
+    from volsr_core.scene.camera_paths import orbit
+    from volsr_core.temporal.layered import LayeredUpsampler
+    from volsr_core.temporal.taau import view_rotation
+
+    config = variant_config("S", 4, 0, taau_base=True, taau_slabs=2)
+    onnx = export_onnx(SuperResolutionNet(config), tmp_path / "layered.onnx", example_size=(8, 12))
+    volume = Volume.from_record(make_phantom(shape=(40, 40, 40)))
+    pipeline = Pipeline(volume, get_preset("CT-Phantom"), onnx, scale=4, size=(64, 48))
+    assert pipeline.slabs == 2
+    layered, previous = LayeredUpsampler(4), None
+    for k, camera in enumerate(orbit(Camera.framing(volume.bounds), 4, degrees=3.0)):
+        image = pipeline.render(camera)
+        lr = pipeline.last_low_resolution
+        assert lr.slabs.shape == (2, 12, 16, 6), k
+        expected = layered(lr.slabs, lr.jitter, pipeline.caster.background, view_rotation(camera, previous),
+                           lr.pixels_per_voxel)
+        assert np.abs(image - np.clip(expected, 0, 1)).max() < 1e-5, k
+        previous = camera
+    assert image.std() > 0.01
+    with pytest.raises(ValueError, match="taau_slabs"):
+        variant_config("S", 4, 0, taau_base=True, taau_aux=True, taau_slabs=2)
+    untrained = TorchEngine(SuperResolutionNet(variant_config("S", 4, 0, taau_base=True)))
+    with pytest.raises(ValueError, match="trained on it"):
+        StatefulUpscaler(untrained, slabs=2)
+
+
 def test_pipeline_update_is_the_one_sync_point_idempotent_with_reasons(exported):
     from volsr_core.io import make_phantom
     from volsr_core.runtime.pipeline import Pipeline

@@ -91,6 +91,20 @@ def test_a_taau_based_network_trains_unrolled_with_the_temporal_loss(tiny_sequen
     assert result["best_psnr"] > 10
 
 
+def test_a_u_net_trains_on_the_layered_taau_of_the_datasets_depth_slabs(tiny_layered_sequences, tmp_path):
+    """``model: {taau_slabs: 2}`` on a U-Net: the loader's history is the layered TAAU's estimate of the dataset's
+    depth slabs (three channels, no side outputs), the network trains on it, and the checkpoint keeps the setting."""
+    from volsr_core.sr.checkpoint import load_model
+
+    path = write_config(tmp_path, tiny_layered_sequences, steps=4, unroll=2, validate_every=4)
+    config = load_training_config(path).updated({"data": {"previous_frames": 0},
+                                                 "model": {"taau_base": True, "taau_slabs": 2}})
+    result = Trainer(config, progress=False).run()
+    assert result["step"] == 4 and torch.isfinite(torch.tensor(losses(tmp_path / "run"))).all()
+    model = load_model(tmp_path / "run" / "best.pt")
+    assert (model.config.taau_slabs, model.config.history_channels, bool(model.config.widths)) == (2, 3, True)
+
+
 def test_model_init_starts_fine_tuning_from_given_weights(tiny_sequences, tmp_path):
     first = load_training_config(write_config(tmp_path / "a", tiny_sequences, steps=4))
     Trainer(first, progress=False).run()
@@ -136,7 +150,8 @@ def test_defaults_fill_what_the_file_leaves_out_and_paths_resolve_against_its_fo
     ("data: {root: x}\nloss: [1]", "loss: expected a mapping, got list [1]"),
     ("data: {root: x}\nmodel: {variant: XS, base_kernel: 4}", "model: base_kernel must be 0 or odd, got 4"),
     ("data: {root: x}\nmodel: {variant: XS, base_orientations: 3}", "model: base_orientations must be 1, or 2 with"),
-    ("data: {root: x}\nmodel: {variant: S, taau_base: true, taau_slabs: 2}", "model: taau_slabs puts a base filter"),
+    ("data: {root: x}\nmodel: {variant: S, taau_base: true, taau_aux: true, taau_slabs: 2}",
+     "model: taau_slabs puts a TAAU-based network"),
     ("seed: 1", "data.root: missing (the dataset folder made by `volsr dataset`)"),
     ("", "(top level): expected a mapping, got nothing"),
     ("data: {root: x", "not valid YAML at line 1"),

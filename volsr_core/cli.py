@@ -262,7 +262,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
                              + (f" {args.scale} / --stretch {k})" if k > 1 else ")"))
         if args.slabs and not takes_slabs(engine):
             raise InputError(model, f"takes no depth slabs (--slabs {args.slabs}): only a base-filter model on TAAU "
-                             "(variant XS) refines the layered TAAU")
+                             "(variant XS) or a network trained on it (taau_slabs) refines the layered TAAU")
         scale = model_scale
 
     for part in stale_parts(out / "summary.md"):  # left by a killed run
@@ -390,8 +390,9 @@ def add_upscale_parser(sub) -> None:
                     "panel's size")
     up.add_argument("--slabs", type=parse_slabs, default=None, metavar="auto|K",
                     help="render each frame in K depth slabs, each with its own TAAU history (the layered TAAU, "
-                    "docs/temporal.md), for an XS model to refine; 0: the TAAU on the frame's colour [auto: the "
-                    "model's own, 2 for XS at 4x and more, else 0]")
+                    "docs/temporal.md), for an XS model or a network trained on it to refine; 0: the TAAU on the "
+                    "frame's colour [auto: the slabs the model was trained on (2 for the shipped XS 4x and U-Nets), "
+                    "else 2 for XS at 4x and more, else 0]")
     up.add_argument("--stretch", type=parse_stretch, default="auto", metavar="auto|K",
                     help="run the model at 1/K of --size and stretch its image by K to it (bicubic): --scale 4 "
                     "--stretch 2 renders at 1/4 size and runs the 2x model to 1/2 size, as near the curve of "

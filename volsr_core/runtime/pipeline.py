@@ -79,7 +79,8 @@ class Pipeline(KeepsLastFrame):
     - ``max_turn`` (degrees), ``max_zoom``: a camera that turned or zoomed further than this since
       the last frame is a cut (:func:`~volsr_core.runtime.upscaler.camera_jump`);
     - ``slabs``: K > 0 renders each frame in K depth slabs and accumulates them with the layered TAAU, one
-      history per slab (docs/temporal.md, "Layered history"); only for a base-filter model on TAAU (XS);
+      history per slab (docs/temporal.md, "Layered history"); only for a base-filter model on TAAU (XS) or a
+      network trained on the layered TAAU (``taau_slabs``);
       0 runs the TAAU on the frame's colour; None (the default) the model's own
       (:func:`~volsr_core.runtime.upscaler.default_slabs`: two for XS at 4x and more, else 0).
 

@@ -82,10 +82,12 @@ LAYERED_FROM_SCALE = 4  # the smallest scale it is the default at: at 2x TAAU's 
 
 
 def takes_slabs(engine: Any) -> bool:
-    """Whether ``engine``'s model can refine the layered TAAU: a base filter (variant XS, no U-Net) whose history is
-    a TAAU estimate of colour alone (no side outputs), whichever engine runs it (the CPU kernel, torch, a GPU)."""
+    """Whether ``engine``'s model can refine the layered TAAU: a model whose history is a TAAU estimate of colour
+    alone (no side outputs) that is a base filter (variant XS, no U-Net), which may take any TAAU, or a U-Net trained
+    on the layered TAAU (``taau_slabs``), whichever engine runs it (the CPU kernel, onnxruntime, torch, a GPU)."""
     config = engine.config
-    return not config.widths and history_mode(config) == "taau" and not getattr(config, "taau_aux", False)
+    refines = not config.widths or getattr(config, "taau_slabs", 0) > 0  # a U-Net only where it was trained on slabs
+    return refines and history_mode(config) == "taau" and not getattr(config, "taau_aux", False)
 
 
 def default_slabs(engine: Any) -> int:
@@ -122,9 +124,9 @@ class StatefulUpscaler:
 
     ``resets`` counts the drops and ``last_reset_reason`` says why the last one happened.
 
-    ``slabs`` K > 0 (a base-filter model on TAAU only, variant XS) runs the layered TAAU
-    (:class:`~volsr_core.temporal.layered.LayeredUpsampler`) on frames rendered in K depth slabs
-    (``RayCaster.render(..., slabs=K)``) instead of the TAAU on their colour, and the filter on its estimate;
+    ``slabs`` K > 0 (a model that :func:`takes_slabs`: variant XS on TAAU, or a U-Net trained on slabs) runs the
+    layered TAAU (:class:`~volsr_core.temporal.layered.LayeredUpsampler`) on frames rendered in K depth slabs
+    (``RayCaster.render(..., slabs=K)``) instead of the TAAU on their colour, and the model on its estimate;
     0 runs the TAAU; None (the default) takes :func:`default_slabs` of the engine.
 
     ``stretch`` k > 1 returns the images stretched by k (a model at 1/k of the output size: ``Pipeline(...,
@@ -153,7 +155,7 @@ class StatefulUpscaler:
             raise ValueError(f"depth slabs must be 0 or more, got {self.slabs}")
         if self.slabs and not takes_slabs(engine):
             raise ValueError("depth slabs feed a layered TAAU, which only a base-filter model on TAAU (variant XS) "
-                             "refines")
+                             "or a network trained on it (taau_slabs) refines")
         # on a GPU a base filter on TAAU (variant XS) runs where the frame was rendered: TAAU, filter and all
         self.on_device = device == "cuda" and self.base_filter is not None and takes_slabs(engine)
         # the layered TAAU on the frames' slabs, or the TAAU on their colour, whichever the model was fitted on

@@ -35,7 +35,7 @@ class DataSection:
 class ModelSection:
     """The network: a sized variant (XS, S, M, L), optionally with its own ``fold`` and ``widths`` (XS: its
     ``base_kernel``); the history flags as :class:`~volsr_core.sr.network_config.NetworkConfig` has them
-    (``taau_slabs`` K: XS on the layered TAAU of K depth slabs, the dataset's ``slabs``); ``init`` names weights
+    (``taau_slabs`` K: on the layered TAAU of K depth slabs, the dataset's ``slabs``); ``init`` names weights
     (model file or checkpoint) to fine-tune from. ``base_kernel`` (odd) and ``base_orientations`` (1, or 2: a pair
     of filters chosen per pixel by orientation) override the variant's base filter."""
 

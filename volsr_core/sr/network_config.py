@@ -39,6 +39,7 @@ class NetworkConfig:
     base_orientations: int = 1  # 2: two base filters, each pixel taking the one for its local orientation (BaseFilter)
     taau_fine_sampling: bool = False  # taau_base, its TAAU told each frame's pixels per voxel (smooths fine frames)
     taau_slabs: int = 0         # taau_base on the layered TAAU's estimate of frames rendered in this many depth slabs
+                                # (no taau_aux: the layered TAAU has no side outputs)
 
     def __post_init__(self) -> None:
         if self.scale not in SCALES:
@@ -56,9 +57,9 @@ class NetworkConfig:
             raise ValueError("taau_aux adds TAAU's side outputs to a TAAU-based network's history (taau_base)")
         if self.taau_fine_sampling and not self.taau_base:
             raise ValueError("taau_fine_sampling tells a TAAU-based network's TAAU (taau_base) how fine frames are")
-        if self.taau_slabs < 0 or (self.taau_slabs and (not self.taau_base or self.taau_aux or self.widths)):
-            raise ValueError(f"taau_slabs puts a base filter on TAAU (taau_base, no U-Net, no taau_aux: what the "
-                             f"runtime's layered TAAU feeds) on the layered TAAU: 0 or more, got {self.taau_slabs}")
+        if self.taau_slabs < 0 or (self.taau_slabs and (not self.taau_base or self.taau_aux)):
+            raise ValueError(f"taau_slabs puts a TAAU-based network (taau_base, no taau_aux: the layered TAAU has no "
+                             f"side outputs) on the layered TAAU: 0 or more, got {self.taau_slabs}")
         if self.base_kernel < 0 or (self.base_kernel and self.base_kernel % 2 == 0):
             raise ValueError(f"base_kernel must be 0 or odd, got {self.base_kernel}")
         if self.base_orientations not in (1, 2) or (self.base_orientations == 2 and not self.base_kernel):
@@ -122,8 +123,8 @@ def variant_config(variant: str, scale: int = 4, previous_frames: int = 2,
     estimate with ``taau_base``, or with ``taau_slabs`` K the layered TAAU's on K depth slabs, else the
     bilinear upscale), wide enough to undo a blur of one LR pixel, at 2x a pair of them chosen per pixel
     by orientation; it reads no previous frames and no side outputs (``previous_frames``, ``recurrent``
-    and ``taau_aux`` are ignored). ``taau_slabs`` is for XS alone (the runtime's layered TAAU feeds a
-    filter, not a U-Net).
+    and ``taau_aux`` are ignored). ``taau_slabs`` puts any variant on the layered TAAU (a U-Net too, without
+    ``taau_aux``: the layered TAAU has no side outputs).
     """
     variant = variant.upper()
     history = {"recurrent": recurrent, "taau_base": taau_base, "taau_aux": taau_aux,
