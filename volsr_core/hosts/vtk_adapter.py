@@ -51,10 +51,10 @@ class VolSRPostProcess:
     - ``model``, ``scale``, ``variant``, ``device``, ``backend``, ``fp16``, ``threads``,
       ``sample_distance``, ``slabs``, ``stretch``: as :class:`~volsr_core.runtime.pipeline.Pipeline` takes them
       (None model: the shipped one of ``variant`` at ``scale`` / ``stretch``, by default VolSR XS 2x, the model
-      that pays off on a CPU; a model file upscales by its own scale; None slabs: the model's own, two
-      depth slabs for XS at 4x and more; ``stretch`` 2 at ``scale`` 4: the 2x model to half the viewport, stretched
-      bicubically; "auto", the default: so where a voxel spans two or more viewport pixels (judged at each new
-      history) or while the view turns fast for its sampling);
+      that pays off on a CPU; a model file upscales by its own scale; None slabs: the model's own (those it was
+      trained on: two for the shipped XS 4x and U-Nets), else two depth slabs for XS at 4x and more; ``stretch`` 2
+      at ``scale`` 4: the 2x model to half the viewport, stretched bicubically; "auto", the default: so where a voxel
+      spans two or more viewport pixels (judged at each new history) or while the view turns fast for its sampling);
     - ``layer``: the window layer of the overlay renderer (default: the host renderer's + 1;
       3D Slicer wants 3); the window gets enough layers;
     - ``reset_angle`` (degrees), ``reset_zoom``: a camera that turned further than this between two

@@ -80,9 +80,9 @@ class Pipeline(KeepsLastFrame):
       the last frame is a cut (:func:`~volsr_core.runtime.upscaler.camera_jump`);
     - ``slabs``: K > 0 renders each frame in K depth slabs and accumulates them with the layered TAAU, one
       history per slab (docs/temporal.md, "Layered history"); only for a base-filter model on TAAU (XS) or a
-      network trained on the layered TAAU (``taau_slabs``);
-      0 runs the TAAU on the frame's colour; None (the default) the model's own
-      (:func:`~volsr_core.runtime.upscaler.default_slabs`: two for XS at 4x and more, else 0).
+      network trained on the layered TAAU (``taau_slabs``); 0 runs the TAAU on the frame's colour; None (the
+      default) the model's own (:func:`~volsr_core.runtime.upscaler.default_slabs`: those it was trained on, two for
+      the shipped XS 4x and U-Nets, else two for XS at 4x and more, else 0).
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
     rendering and upscaling that frame (``render_ms``, ``network_ms`` with the stretch, ``total_ms``: on the GPU
@@ -221,8 +221,9 @@ def auto_stretches(scale: int | None, variant: str | None) -> tuple[int, ...]:
     ``scale``, ``scale`` / k at least 2) at whose scale / k the variant ships, and with it 2k where k is 1 and the
     variant ships at half the scale too (4x: XS 4x, or XS 2x stretched where the view asks for it). So a scale the
     variant does not ship runs its model of the largest scale below, stretched: 8x XS 4x + bicubic 2x (the one 8x
-    model is a U-Net, 2.7-4.6 times as slow as XS 4x stretched at every point measured and below it in PSNR at 15 of
-    16: docs/performance.md, "How fast the view turns"), 16x XS 4x + bicubic 4x (docs/performance.md, "16x"); a
+    model is a U-Net, 2.5-3.8 times as slow as XS 4x stretched in every run of docs/bench and below the native +
+    bilinear curve in all, where XS 4x stretched lies above it in half: docs/performance.md, "How fast the view
+    turns"), 16x XS 4x + bicubic 4x (docs/performance.md, "16x"); a
     named variant that ships at no such scale gets (1,), whose model the pipeline then fails to find, naming what
     ships."""
     if scale is None or scale < 4:
