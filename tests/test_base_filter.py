@@ -166,7 +166,7 @@ def test_the_upscaler_makes_the_same_frames_through_the_kernel_as_through_the_gr
 
 def test_an_xs_pipeline_in_depth_slabs_filters_the_layered_taau_estimate(tmp_path):
     """Pipeline(slabs=K): frames rendered in K depth slabs, the layered TAAU's estimate (over the pipeline's
-    background, told the frame's pixels per voxel) through XS's filter; a U-Net model takes no slabs."""
+    background, told the frame's pixels per voxel) through XS's filter; a U-Net not trained on slabs takes none."""
     from volsr_core.temporal.layered import LayeredUpsampler
     from volsr_core.temporal.taau import view_rotation
 
@@ -184,8 +184,9 @@ def test_an_xs_pipeline_in_depth_slabs_filters_the_layered_taau_estimate(tmp_pat
         expected = np.clip(filter_image(estimate, *pipeline.engine.base_filter), 0.0, 1.0)
         assert np.abs(image - expected).max() < 1e-6
         previous = camera
-    with pytest.raises(ValueError, match="depth slabs"):  # the shipped S 2x
-        Pipeline(volume, get_preset("CT-Phantom"), model_file("S", 2), scale=2, slabs=2)
+    one_layer = SuperResolutionNet(variant_config("S", 2, 0, taau_base=True))  # every shipped U-Net takes slabs
+    with pytest.raises(ValueError, match="depth slabs"):
+        Pipeline(volume, get_preset("CT-Phantom"), one_layer, scale=2, slabs=2)
 
 
 def test_the_shipped_xs_4x_runs_its_filter_in_the_kernel_on_its_depth_slabs_from_either_file():

@@ -43,7 +43,7 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
     _, results = bench_run
     rows = by_label(results)
     expected = ({f"native {n} spp" for n in SPP} | {f"native 1/{f} size + bilinear" for f in FACTORS}
-                | {f"TAAU {s}x" for s in SCALES} | {"VolSR S 4x", "VolSR S 4x + bicubic 2x"})
+                | {f"TAAU {s}x" for s in SCALES} | {"VolSR S 4x in 2 slabs", "VolSR S 4x in 2 slabs + bicubic 2x"})
     assert set(rows) == expected
     assert {r["scene"] for r in rows.values()} == {"phantom, CT-Phantom on -1024..3071 (auto)"}
     for r in rows.values():
@@ -57,10 +57,11 @@ def test_every_method_is_measured_with_finite_numbers(bench_run):
         assert r["ms_total_passes"] == pytest.approx([float(np.median(r["ms_total_frames"][3 * p:3 * p + 3]))
                                                       for p in range(3)], abs=1e-3)
         assert (r["ms_network"] == 0) == (r["method"] == "native")
-    volsr = rows["VolSR S 4x"]  # scale and variant came from the ONNX metadata
+    volsr = rows["VolSR S 4x in 2 slabs"]  # scale, variant and slabs came from the ONNX metadata
     assert (volsr["method"], volsr["variant"], volsr["scale"], volsr["model"]) == ("volsr", "S", 4, "s4.onnx")
-    stretched = rows["VolSR S 4x + bicubic 2x"]  # --stretch 2 by default: the 4x model's image stretched, an 8x point
-    assert (stretched["scale"], stretched["stretch"], stretched["model"], volsr["stretch"]) == (8, 2, "s4.onnx", 1)
+    assert (volsr["slabs"], volsr["stretch"]) == (2, 1)  # the slabs the shipped S 4x was trained on
+    stretched = rows["VolSR S 4x in 2 slabs + bicubic 2x"]  # --stretch 2 by default: the 4x model stretched, 8x
+    assert (stretched["scale"], stretched["stretch"], stretched["model"]) == (8, 2, "s4.onnx")
     assert results["settings"]["stretches"] == [2]
     assert results["settings"]["onnxruntime_threads"] == 2 and results["settings"]["measured_frames"] == 3
     assert results["settings"]["timing_passes"] == 3 and results["settings"]["timed_frames"] == 9
@@ -78,13 +79,14 @@ def test_quality_orders_as_expected(bench_run):
 def test_reports_and_target_verdicts(bench_run):
     out, results = bench_run
     md = (out / "bench.md").read_text()
-    assert "## phantom, CT-Phantom" in md and "| VolSR S 4x |" in md and "| native 1 spp |" in md
+    assert "## phantom, CT-Phantom" in md and "| VolSR S 4x in 2 slabs |" in md and "| native 1 spp |" in md
     assert "after 1 warm-up frames" in md and "8-spp" in md
     assert "in 3 passes over the orbit (9 frames a method" in md
-    s4 = by_label(results)["VolSR S 4x"]  # each pass's median in its own column
+    s4 = by_label(results)["VolSR S 4x in 2 slabs"]  # each pass's median in its own column
     each = " / ".join(f"{v:.1f}" for v in s4["ms_total_passes"])
-    assert f"| VolSR S 4x | {s4['ms_render']:.1f} | {s4['ms_network']:.1f} | {s4['ms_total']:.1f} | {each} |" in md
-    assert "| VolSR S 4x + bicubic 2x |" in md and "the model's image at 1/K of the size, stretched" in md
+    times = f"{s4['ms_render']:.1f} | {s4['ms_network']:.1f} | {s4['ms_total']:.1f} | {each}"
+    assert f"| VolSR S 4x in 2 slabs | {times} |" in md
+    assert "| VolSR S 4x in 2 slabs + bicubic 2x |" in md and "the model's image at 1/K of the size, stretched" in md
     assert "1. VolSR at 4x reaches at least native 1-spp PSNR" in md and "2. Every VolSR point lies at least" in md
     from PIL import Image
 
@@ -93,7 +95,7 @@ def test_reports_and_target_verdicts(bench_run):
     assert not list(out.glob(".*")), "no temporary files may remain"
     # the verdicts, worked out here from the run's own rows by the targets' definitions (docs/performance.md)
     rows = by_label(results)
-    native, volsr = rows["native 1 spp"], rows["VolSR S 4x"]
+    native, volsr = rows["native 1 spp"], rows["VolSR S 4x in 2 slabs"]
     fast = volsr["psnr"] >= native["psnr"] and volsr["ms_total"] <= native["ms_total"] / 2
     curve = sorted((r["ms_total"], r["psnr"]) for r in rows.values() if r["method"] == "bilinear" or r is native)
     on_curve = float(np.interp(volsr["ms_total"], [t for t, _ in curve], [p for _, p in curve]))
