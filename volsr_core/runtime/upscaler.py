@@ -14,6 +14,7 @@ import numpy as np
 
 from volsr_core.render.features import FeatureFrame
 from volsr_core.runtime.base_filter import Scratch, filter_image
+from volsr_core.runtime.content_window import content_window
 from volsr_core.runtime.layout import to_channels_first, to_image_clipped
 from volsr_core.scene.camera import Camera, rotation_between
 from volsr_core.sr.history import HistoryFeed, history_mode
@@ -104,6 +105,11 @@ def default_slabs(engine: Any) -> int:
     return fitted_on or (LAYERED_SLABS if engine.config.scale >= LAYERED_FROM_SCALE else 0)
 
 
+WINDOW_SHARE = 0.8
+"""A content window (:func:`~volsr_core.runtime.content_window.content_window`) holding more than this share of a
+frame's LR pixels runs the network on the whole frame."""
+
+
 class StatefulUpscaler:
     """Feeds an engine (:mod:`volsr_core.runtime.engines`) frame by frame, as a viewer renders them.
 
@@ -137,10 +143,18 @@ class StatefulUpscaler:
     (``RayCaster.render(..., on_device=True)``), runs the TAAU and the filter as CUDA kernels and returns the
     (H, W, 3) result there, a device array for the caller to copy back (``Pipeline`` does, after timing the step).
     Other models, and every model on the CPU, take host frames and return host images.
+
+    ``skip_background`` (the default) runs a TAAU-based network without previous frames on the window of the frame
+    where the volume or its TAAU estimate shows (:func:`~volsr_core.runtime.content_window.content_window`, a
+    margin around it) and takes the estimate, the background, outside it; the whole frame when the window holds
+    most of it (more than :data:`WINDOW_SHARE` of its pixels), none where nothing shows. False runs it on every
+    pixel, as it did before 2026-11-29. :attr:`last_window` holds the last frame's window in LR pixels (top, bottom,
+    left, right; bottom and right exclusive).
     """
 
     def __init__(self, engine: Any, max_motion: float = 0.25, max_offscreen: float = 0.5, max_turn: float = 30.0,
-                 max_zoom: float = 2.0, slabs: int | None = None, device: str = "cpu", stretch: int = 1):
+                 max_zoom: float = 2.0, slabs: int | None = None, device: str = "cpu", stretch: int = 1,
+                 skip_background: bool = True):
         if stretch < 1 or int(stretch) != stretch:
             raise ValueError(f"the stretch must be a whole number >= 1, got {stretch!r}")
         self.stretch = int(stretch)
@@ -167,6 +181,10 @@ class StatefulUpscaler:
             self._device_filter = CudaBaseFilter(*self.base_filter)
             self._device_scratch = DeviceScratch()  # on the GPU: TAAU's estimate, the camera-cut check's sample
         self._scratch = Scratch()  # work buffers kept between frames: the base filter's, the network's history
+        # a network that refines TAAU's estimate from the current frame alone reads nothing outside its receptive field
+        self.skip_background = bool(skip_background) and self.config.taau_base and self.config.previous_frames == 0
+        # the LR window the network last ran on (bottom and right exclusive; (0, 0, 0, 0): nowhere), None before
+        self.last_window: tuple[int, int, int, int] | None = None
         self.resets = 0
         self.last_reset_reason = ""
 
@@ -247,9 +265,33 @@ class StatefulUpscaler:
         if parts is not None:  # (1, C, H, W) in a buffer kept between frames: the engine reads it during the call
             shape = (sum(part.shape[2] for part in parts),) + parts[0].shape[:2]
             history = to_channels_first(parts, self._scratch.get("history", shape))[None]
-        out = self.engine(lr, vectors, jitters, history)[0]  # (3, H, W)
+        if history is not None and self.skip_background:
+            out = self._on_content(frame, lr, vectors, jitters, history, background)
+        else:
+            out = self.engine(lr, vectors, jitters, history)[0]  # (3, H, W)
         self.history.keep(out.transpose(1, 2, 0))
         return self._stretched(to_image_clipped(out))
+
+    def _on_content(self, frame: FeatureFrame, lr: np.ndarray, vectors: np.ndarray, jitters: np.ndarray,
+                    history: np.ndarray, background: Sequence[float]) -> np.ndarray:
+        """The network's (3, H, W) output for a TAAU-based network (``history`` (1, C, H, W): the estimate first),
+        run on the frame's content window alone (see the class): the estimate outside it, written into ``history``'s
+        first three planes (the engine is done with them)."""
+        scale = self.config.scale
+        estimate = history[0, :3]
+        top, bottom, left, right = content_window(frame.alpha, estimate, background, scale)
+        h, w = lr.shape[-2:]
+        if (bottom - top) * (right - left) > WINDOW_SHARE * h * w:
+            self.last_window = (0, h, 0, w)
+            return self.engine(lr, vectors, jitters, history)[0]
+        self.last_window = (top, bottom, left, right)
+        if bottom > top and right > left:
+            rows, columns = slice(top, bottom), slice(left, right)
+            hr_rows, hr_columns = slice(top * scale, bottom * scale), slice(left * scale, right * scale)
+            estimate[:, hr_rows, hr_columns] = self.engine(
+                np.ascontiguousarray(lr[..., rows, columns]), np.ascontiguousarray(vectors[..., rows, columns]),
+                jitters, np.ascontiguousarray(history[..., hr_rows, hr_columns]))[0]
+        return estimate
 
     def _stretched(self, image):
         """``image`` (H, W, 3) stretched by :attr:`stretch` (Keys' cubic, :data:`STRETCH_CUBIC_A`, clamped to [0, 1])

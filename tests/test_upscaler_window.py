@@ -1,0 +1,81 @@
+"""The U-Nets on the volume's window alone: where the window lies, and that the image is the whole frame's."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from volsr_core.runtime.content_window import WINDOW_ALIGN, WINDOW_MARGIN, content_window
+
+
+def test_the_window_holds_what_the_frame_or_the_base_shows_widened_and_aligned():
+    """Alpha shows LR rows 20-23 and columns 30-40; the base (2x) differs from the background at HR (100, 9), LR
+    (50, 4), and nowhere else; the window is their hull widened by the margin, its corners moved out to multiples of
+    the alignment and clipped to the 64 x 72 frame."""
+    background = (0.2, 0.3, 0.4)
+    alpha = np.zeros((64, 72), np.float32)
+    alpha[20:24, 30:41] = 0.5
+    base = np.empty((3, 128, 144), np.float32)
+    base[:] = np.float32(background)[:, None, None]
+    assert content_window(alpha, base, background, 2) == (12, 32, 20, 52)  # rows 20 - 8 .. 24 + 8, columns 22 .. 49
+    base[:, 100, 9] = (0.2, 0.3, 0.41)
+    top, bottom, left, right = content_window(alpha, base, background, 2)
+    assert (top, left) == ((20 - WINDOW_MARGIN) // WINDOW_ALIGN * WINDOW_ALIGN, 0)  # LR column 4 - 8 clipped to 0
+    assert (bottom, right) == (-(-(50 + 1 + WINDOW_MARGIN) // WINDOW_ALIGN) * WINDOW_ALIGN, 52)
+    base[:, 100, 9] = background
+    alpha[:] = 0.0
+    assert content_window(alpha, base, background, 2) == (0, 0, 0, 0)
+    alpha[63, 71] = 1e-6
+    assert content_window(alpha, base, background, 2, margin=0, align=1) == (63, 64, 71, 72)
+
+
+class CountingEngine:
+    """A real engine whose calls are counted and whose inputs' LR sizes are kept."""
+
+    def __init__(self, engine):
+        self.engine, self.config, self.sizes = engine, engine.config, []
+
+    def __call__(self, lr, motion, jitter, history=None):
+        self.sizes.append(lr.shape[-2:])
+        return self.engine(lr, motion, jitter, history)
+
+
+def test_the_shipped_u_net_on_the_volumes_window_gives_the_whole_frames_image_where_the_volume_shows(model):
+    """The shipped S 4x on a phantom in the middle of a 256² view over a coloured background: run on the window (the
+    default) it sees a part of each LR frame; where the volume shows its images lie within 5e-3 of those it makes on
+    the whole frame (PSNR there above 60 dB), outside the window they are the background exactly (the network run on
+    every pixel tints a background it was not trained on by up to about 0.02), and a view that shows nothing runs no
+    network and is the background."""
+    pytest.importorskip("onnxruntime")
+    from volsr_core.io import make_phantom
+    from volsr_core.runtime.engines import OnnxEngine
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.scene import Volume, get_preset
+    from volsr_core.scene.camera import Camera
+    from volsr_core.scene.camera_paths import orbit
+
+    background = np.float32([0.1, 0.1, 0.2])
+    volume = Volume.from_record(make_phantom(shape=(48, 48, 48)))
+    pipelines = [Pipeline(volume, get_preset("CT-Phantom"), model, scale=4, size=(256, 256), threads=2,
+                          background=tuple(background)) for _ in range(2)]
+    engines = [CountingEngine(OnnxEngine(model, providers=["CPUExecutionProvider"])) for _ in range(2)]
+    for pipeline, engine in zip(pipelines, engines):
+        pipeline.upscaler.engine = engine
+    pipelines[1].upscaler.skip_background = False
+    start = Camera.framing(volume.bounds).dolly(0.45).reset_clipping_range(volume.bounds)
+    for camera in orbit(start, 5, degrees=10.0):
+        window, whole = (pipeline.render(camera) for pipeline in pipelines)
+        shows = np.repeat(np.repeat(pipelines[0].last_low_resolution.alpha > 0, 4, 0), 4, 1)
+        top, bottom, left, right = pipelines[0].upscaler.last_window
+        inside = np.zeros(shows.shape, bool)
+        inside[4 * top:4 * bottom, 4 * left:4 * right] = True
+        assert shows.mean() > 0.01 and not (shows & ~inside).any()
+        error = float(np.mean((window[shows] - whole[shows]) ** 2))
+        assert np.abs(window[shows] - whole[shows]).max() < 5e-3 and 10 * np.log10(1.0 / error) > 60.0
+        np.testing.assert_array_equal(window[~inside], np.broadcast_to(background, window[~inside].shape))
+        assert engines[0].sizes[-1] == (bottom - top, right - left) and engines[1].sizes[-1] == (64, 64)
+        assert (bottom - top) * (right - left) < 0.6 * 64 * 64
+    away = Camera(position=start.position, focal_point=2 * start.position - start.focal_point, view_up=start.view_up)
+    calls = len(engines[0].sizes)
+    image = pipelines[0].render(away)
+    assert len(engines[0].sizes) == calls and pipelines[0].upscaler.last_window == (0, 0, 0, 0)
+    np.testing.assert_array_equal(image, np.broadcast_to(background, image.shape))

@@ -1,0 +1,93 @@
+"""Where a frame shows the volume: the window of LR pixels a TAAU-based network has to run on.
+
+Most of a view is background around the volume (of the bench's 512² frames 68-87% of the pixels,
+docs/performance-studies.md, "Where the frame is background"). There a TAAU-based network
+(``NetworkConfig.taau_base``, no previous frames) sees the same inputs everywhere: the background colour, no
+alpha, the far depth, and a base (the TAAU estimate) that is the background; so it adds the same tiny residual
+everywhere, and the base alone is its output to within that. :func:`content_window` finds the LR rows and columns
+where the frame or the base shows something, widened by a margin that covers what the network's receptive field
+carries from the window's edge into the content, so that :class:`~volsr_core.runtime.upscaler.StatefulUpscaler`
+runs the network on that window alone and takes the base outside it (measured in docs/performance.md, "The
+U-Nets on the volume alone").
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+WINDOW_MARGIN = 8
+"""LR pixels the window reaches beyond the content on each side: where the volume shows, the shipped U-Nets' images
+on the bench's orbits lie within 0.0043 of those they make on the whole frame (PSNR 84-93 dB against them;
+``benchmarks/bench_content_window.py``), where with 1 LR pixel they lay up to 0.016 from them on the test's
+phantom (``tests/test_upscaler_window.py``)."""
+_BLOCK = 64  # HR pixels :func:`_row_extents` tests at once
+WINDOW_ALIGN = 4
+"""The window's corners lie on multiples of this many LR pixels (or on the frame's edge), so that the U-Nets' two
+max-pools tile it as they tile the whole frame."""
+
+
+@numba.njit(inline="always", fastmath=True, boundscheck=False)
+def _differs(red, green, blue, start, stop, b0, b1, b2):
+    """How many of the pixels start .. stop - 1 of one row's planes differ from (b0, b1, b2): a sum without a branch,
+    which the compiler turns into vector instructions."""
+    count = 0
+    for x in range(start, stop):
+        count += (red[x] != b0) | (green[x] != b1) | (blue[x] != b2)
+    return count
+
+
+@numba.njit(parallel=True, cache=True, fastmath=True, boundscheck=False)
+def _row_extents(alpha, base, background, scale, extents):
+    """Per LR row j of ``alpha`` (h, w), into ``extents`` (h, 2): the first and last LR column where ``alpha`` is
+    above 0 or where one of the row's ``scale`` HR rows of ``base`` (>= 3, h * scale, w * scale: RGB planes first)
+    differs from ``background`` (3) in an RGB channel; (w, -1) where neither does. The HR rows are read in blocks of
+    :data:`_BLOCK` pixels from each end up to the columns known to show."""
+    h, w = alpha.shape
+    width = base.shape[2]
+    b0, b1, b2 = background[0], background[1], background[2]
+    for j in numba.prange(h):
+        lo, hi = w, -1
+        for i in range(w):
+            if alpha[j, i] > 0.0:
+                lo = min(lo, i)
+                hi = i
+        for y in range(j * scale, min((j + 1) * scale, base.shape[1])):
+            red, green, blue = base[0, y], base[1, y], base[2, y]
+            for start in range(0, min(lo * scale, width), _BLOCK):  # from the left up to the first that shows
+                stop = min(start + _BLOCK, lo * scale, width)
+                if _differs(red, green, blue, start, stop, b0, b1, b2):
+                    for x in range(start, stop):
+                        if red[x] != b0 or green[x] != b1 or blue[x] != b2:
+                            lo = x // scale
+                            break
+                    break
+            for stop in range(width, (hi + 1) * scale, -_BLOCK):  # from the right down to the last
+                start = max(stop - _BLOCK, (hi + 1) * scale, 0)
+                if _differs(red, green, blue, start, stop, b0, b1, b2):
+                    for x in range(stop - 1, start - 1, -1):
+                        if red[x] != b0 or green[x] != b1 or blue[x] != b2:
+                            hi = x // scale
+                            break
+                    break
+        extents[j, 0], extents[j, 1] = lo, hi
+
+
+def content_window(alpha: np.ndarray, base: np.ndarray, background, scale: int, margin: int = WINDOW_MARGIN,
+                   align: int = WINDOW_ALIGN) -> tuple[int, int, int, int]:
+    """The LR window (top, bottom, left, right; bottom and right exclusive) holding every LR pixel where ``alpha``
+    (h, w: the LR frame's accumulated opacity) is above 0 or ``base`` (C >= 3, h * scale, w * scale: the HR image
+    the network refines as planes, RGB first) differs from ``background`` (RGB), widened by ``margin`` LR pixels
+    each way, its corners moved out to multiples of ``align`` and clipped to the frame; (0, 0, 0, 0) where nothing
+    shows."""
+    h, w = alpha.shape
+    extents = np.empty((h, 2), dtype=np.int64)
+    _row_extents(np.ascontiguousarray(alpha, dtype=np.float32), np.ascontiguousarray(base, dtype=np.float32),
+                 np.asarray(background, dtype=np.float32)[:3], int(scale), extents)
+    rows = np.flatnonzero(extents[:, 1] >= extents[:, 0])
+    if rows.size == 0:
+        return 0, 0, 0, 0
+    shown = extents[rows]
+    top, bottom = rows[0] - margin, rows[-1] + 1 + margin
+    left, right = int(shown[:, 0].min()) - margin, int(shown[:, 1].max()) + 1 + margin
+    return (max(top // align * align, 0), min(-(-bottom // align) * align, h),
+            max(left // align * align, 0), min(-(-right // align) * align, w))
