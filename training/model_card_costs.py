@@ -24,7 +24,8 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
     distance to the curve is the one the run's own target check worked out, ``targets``)."""
     lines = [SECTION, "",
              "Medians over the timed frames of `volsr bench` (those after the warm-up in each of its timing passes "
-             "over the orbit: 24 a method by default; ONNX Runtime, CPU, 2 threads, or for variant XS its "
+             "over the orbit: 24 a method by default; ONNX Runtime, CPU, 2 threads, on the window of the frame "
+             "where the volume shows (`StatefulUpscaler(skip_background=True)`), or for variant XS its "
              "numba filter kernel, on the project's "
              "2-core machine; the LR render is the ray caster's; \"K slabs\": rendered in K depth slabs, the layered "
              "TAAU before the model; \"+ bicubic Kx\": the model's image stretched by K, a point at K times its "
