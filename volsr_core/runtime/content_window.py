@@ -3,12 +3,13 @@
 Most of a view is background around the volume (of the bench's 512² frames 68-87% of the pixels,
 docs/performance-studies.md, "Where the frame is background"). There a TAAU-based network
 (``NetworkConfig.taau_base``, no previous frames) sees the same inputs everywhere: the background colour, no
-alpha, the far depth, and a base (the TAAU estimate) that is the background; so it adds the same tiny residual
-everywhere, and the base alone is its output to within that. :func:`content_window` finds the LR rows and columns
-where the frame or the base shows something, widened by a margin that covers what the network's receptive field
-carries from the window's edge into the content, so that :class:`~volsr_core.runtime.upscaler.StatefulUpscaler`
-runs the network on that window alone and takes the base outside it (measured in docs/performance.md, "The
-U-Nets on the volume alone").
+alpha, the far depth, and a base (the TAAU estimate) that is the background; so it adds the same residual
+everywhere (about 1e-5 on a black background, up to about 0.02 on a coloured one, which the training videos never
+had), and the base alone, the background, is what it should have made there. :func:`content_window` finds the LR
+rows and columns where the frame or the base shows something, widened by a margin that covers what the network's
+receptive field carries from the window's edge into the content, so that
+:class:`~volsr_core.runtime.upscaler.StatefulUpscaler` runs the network on that window alone and takes the base
+outside it (measured in docs/performance.md, "The U-Nets on the volume alone").
 """
 from __future__ import annotations
 
@@ -20,10 +21,10 @@ WINDOW_MARGIN = 8
 on the bench's orbits lie within 0.0043 of those they make on the whole frame (PSNR 84-93 dB against them;
 ``benchmarks/bench_content_window.py``), where with 1 LR pixel they lay up to 0.016 from them on the test's
 phantom (``tests/test_upscaler_window.py``)."""
-_BLOCK = 64  # HR pixels :func:`_row_extents` tests at once
 WINDOW_ALIGN = 4
 """The window's corners lie on multiples of this many LR pixels (or on the frame's edge), so that the U-Nets' two
 max-pools tile it as they tile the whole frame."""
+_BLOCK = 64  # HR pixels :func:`_row_extents` tests at once
 
 
 @numba.njit(inline="always", fastmath=True, boundscheck=False)
