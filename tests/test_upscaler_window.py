@@ -26,6 +26,8 @@ def test_the_window_holds_what_the_frame_or_the_base_shows_widened_and_aligned()
     assert content_window(alpha, base, background, 2) == (0, 0, 0, 0)
     alpha[63, 71] = 1e-6
     assert content_window(alpha, base, background, 2, margin=0, align=1) == (63, 64, 71, 72)
+    base[:, 0, 0] = 1.0  # not read: a base given as None is the background beyond one LR pixel of the alpha
+    assert content_window(alpha, None, background, 2, margin=0, align=1) == (62, 64, 70, 72)
 
 
 class CountingEngine:

@@ -279,7 +279,8 @@ class StatefulUpscaler:
         first three planes (the engine is done with them)."""
         scale = self.config.scale
         estimate = history[0, :3]
-        top, bottom, left, right = content_window(frame.alpha, estimate, background, scale)
+        # the layered TAAU's estimate is the background away from the frame's alpha: only a one-layer TAAU's is read
+        top, bottom, left, right = content_window(frame.alpha, None if self.slabs else estimate, background, scale)
         h, w = lr.shape[-2:]
         if (bottom - top) * (right - left) > WINDOW_SHARE * h * w:
             self.last_window = (0, h, 0, w)
