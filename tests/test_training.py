@@ -19,7 +19,8 @@ torch = pytest.importorskip("torch")
 
 from volsr_core.errors import InputError  # noqa: E402
 from volsr_core.sr.checkpoint import load_checkpoint  # noqa: E402
-from volsr_core.sr.config import LossSection, TrainingConfig, load_training_config  # noqa: E402
+from volsr_core.sr.config import LossSection, TrainingConfig, load_training_config, network_config  # noqa: E402
+from volsr_core.sr.network import SuperResolutionNet  # noqa: E402
 from volsr_core.sr.training import Trainer  # noqa: E402
 
 def write_config(folder: Path, dataset: Path, recurrent: bool = False, **train) -> Path:
@@ -132,6 +133,16 @@ def test_defaults_fill_what_the_file_leaves_out_and_paths_resolve_against_its_fo
     assert config.data.features == ("color", "depth", "max_rgba") and config.data.crop == 96
     assert config.model.variant == "S" and config.model.init is None and config.optim.lr == 1e-3
     assert config.loss == LossSection() and config.seed == 0
+
+
+def test_the_model_section_sizes_each_block_of_the_variant(tmp_path):
+    path = tmp_path / "train.yaml"
+    path.write_text("data: {root: data, scale: 2, previous_frames: 0}\n"
+                    "model: {variant: S, taau_base: true, widths: [16, 24], feature_width: 8, reweight_width: 12}\n")
+    net = SuperResolutionNet(network_config(load_training_config(path)))
+    assert (net.config.widths, net.config.fold) == ((16, 24), 2)
+    assert net.features.conv1.out_channels == 8 and net.reweight.first.out_channels == 12
+    assert net.reconstruct.first.out_channels == 16
 
 
 @pytest.mark.parametrize("text, message", [

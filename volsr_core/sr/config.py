@@ -33,8 +33,9 @@ class DataSection:
 
 @dataclass(frozen=True, kw_only=True)
 class ModelSection:
-    """The network: a sized variant (XS, S, M, L), optionally with its own ``fold`` and ``widths`` (XS: its
-    ``base_kernel``); the history flags as :class:`~volsr_core.sr.network_config.NetworkConfig` has them
+    """The network: a sized variant (XS, S, M, L), optionally with its own ``fold``, U-Net ``widths`` and the hidden
+    channels of its feature block and reweighting (``feature_width``, ``reweight_width``; XS: its ``base_kernel``);
+    the history flags as :class:`~volsr_core.sr.network_config.NetworkConfig` has them
     (``taau_slabs`` K: on the layered TAAU of K depth slabs, the dataset's ``slabs``); ``init`` names weights
     (model file or checkpoint) to fine-tune from. ``base_kernel`` (odd) and ``base_orientations`` (1, or 2: a pair
     of filters chosen per pixel by orientation) override the variant's base filter."""
@@ -42,6 +43,8 @@ class ModelSection:
     variant: str = "S"
     fold: int | None = None
     widths: tuple[int, ...] | None = None
+    feature_width: int | None = None
+    reweight_width: int | None = None
     recurrent: bool = False
     taau_base: bool = False
     taau_aux: bool = False
@@ -129,8 +132,8 @@ def network_config(config: TrainingConfig) -> NetworkConfig:
     data, model = config.data, config.model
     net = variant_config(model.variant, data.scale, data.previous_frames, data.features, model.recurrent,
                          model.taau_base, model.taau_aux, model.taau_fine_sampling, model.taau_slabs)
-    overrides = {k: v for k, v in (("fold", model.fold), ("widths", model.widths), ("base_kernel", model.base_kernel),
-                                    ("base_orientations", model.base_orientations)) if v is not None}
+    names = ("fold", "widths", "feature_width", "reweight_width", "base_kernel", "base_orientations")
+    overrides = {k: getattr(model, k) for k in names if getattr(model, k) is not None}
     return NetworkConfig(**{**net.to_dict(), **overrides}) if overrides else net
 
 
