@@ -163,6 +163,8 @@ def test_the_model_section_sizes_each_block_of_the_variant(tmp_path):
     ("data: {root: x}\nmodel: {variant: XS, base_orientations: 3}", "model: base_orientations must be 1, or 2 with"),
     ("data: {root: x}\nmodel: {variant: S, taau_base: true, taau_aux: true, taau_slabs: 2}",
      "model: taau_slabs puts a TAAU-based network"),
+    ("data: {root: x}\nmodel: {reweight_width: 0}", "model: reweight_width: channels must be at least 1, got 0"),
+    ("data: {root: x}\nmodel: {widths: [16, 0]}", "model: widths: channels must be at least 1, got (16, 0)"),
     ("seed: 1", "data.root: missing (the dataset folder made by `volsr dataset`)"),
     ("", "(top level): expected a mapping, got nothing"),
     ("data: {root: x", "not valid YAML at line 1"),

@@ -70,6 +70,11 @@ class NetworkConfig:
         if not self.widths and (self.recurrent or self.previous_frames):
             raise ValueError("a network without a U-Net (widths ()) filters its base only: no previous frames, "
                              "not recurrent")
+        sizes = {"widths": min(self.widths, default=1), "feature_width": self.feature_width,
+                 "reweight_width": self.reweight_width}
+        for name, size in sizes.items():
+            if size < 1:
+                raise ValueError(f"{name}: channels must be at least 1, got {getattr(self, name)}")
         object.__setattr__(self, "features", tuple(self.features))
         object.__setattr__(self, "widths", tuple(self.widths))
 
