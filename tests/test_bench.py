@@ -430,3 +430,31 @@ def test_the_stretched_rows_are_the_models_whose_scale_times_the_stretch_is_benc
     assert volsr_rows([xs2, s4, s8], [2, 4, 8], [2]) == [(xs2, 1), (xs2, 2), (s4, 1), (s4, 2), (s8, 1)]
     assert volsr_rows([xs2, s4], [4], [2]) == [(xs2, 2), (s4, 1)]
     assert volsr_rows([xs2, s4], [2, 4, 8], [1]) == [(xs2, 1), (s4, 1)], "stretch 1: no stretched rows"
+
+
+def test_a_model_is_the_variant_of_its_fold_whatever_its_widths():
+    from volsr_core.apps.bench.run import infer_variant
+    from volsr_core.sr.network_config import NetworkConfig, variant_config
+
+    def sized(variant, scale, **sizes):
+        base = variant_config(variant, scale, 0, taau_base=True)
+        return NetworkConfig(**{**base.to_dict(), **sizes})
+
+    assert infer_variant(sized("S", 4, widths=(16, 24, 32), reweight_width=16)) == "S"
+    assert infer_variant(sized("M", 4, widths=(16, 24))) == "M"
+    assert [infer_variant(variant_config(v, 2, 0)) for v in ("XS", "S", "M", "L")] == ["XS", "S", "M", "L"]
+    assert infer_variant(sized("L", 2, widths=(8, 12))) == "M"  # M and L both fold 1 at 2x: the smaller
+
+
+def test_two_models_of_one_variant_and_scale_go_by_their_file_names(tmp_path):
+    import shutil
+
+    pytest.importorskip("onnxruntime")
+    from volsr_core.apps.bench.run import find_models
+    from volsr_core.runtime.models import model_file
+
+    for name in ("before", "after"):
+        shutil.copy(model_file("S", 4, "onnx"), tmp_path / f"{name}.onnx")
+    shutil.copy(model_file("XS", 2, "onnx"), tmp_path / "xs.onnx")
+    found = {(m.variant, m.scale) for m in find_models(tmp_path, variants=["XS"])}
+    assert found == {("XS", 2), ("after", 4), ("before", 4)}

@@ -40,6 +40,7 @@ import os
 import platform
 import statistics
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -73,21 +74,24 @@ class ModelSpec:
 
 
 def infer_variant(config) -> str | None:
-    """The variant (:data:`VARIANTS`) whose shape ``config`` (a NetworkConfig) is, else None."""
+    """The variant (:data:`VARIANTS`) ``config`` (a NetworkConfig) is, else None: XS without a U-Net, else the U-Net
+    variant of its fold (S folds by the scale, M by half of it, L by a quarter; a model's widths are its own, the
+    shipped S 2x and S 4x narrower than ``variant_config``'s), where two share the fold (M and L at 2x) the one whose
+    widths it has, else the smaller."""
     from volsr_core.sr.network_config import variant_config
 
-    if not config.widths and config.base_kernel:  # no U-Net, a filter of any size: XS
-        return "XS"
-    for name in VARIANTS:
+    if not config.widths:
+        return "XS" if config.base_kernel else None
+    candidates = []
+    for rank, name in enumerate(VARIANTS):
         try:
             reference = variant_config(name, config.scale, config.previous_frames, config.features,
                                        recurrent=config.recurrent, taau_base=config.taau_base)
         except ValueError:
             continue
-        shape = ("fold", "widths", "reweight_width", "feature_width", "base_kernel")
-        if all(getattr(reference, key) == getattr(config, key) for key in shape):
-            return name
-    return None
+        if reference.widths and reference.fold == config.fold:
+            candidates.append((reference.widths != config.widths, rank, name))
+    return min(candidates)[2] if candidates else None
 
 
 def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[str] = VARIANTS,
@@ -96,8 +100,9 @@ def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[
 
     Without ``models_dir``: the shipped registry's (:func:`~volsr_core.runtime.models.shipped_models`,
     SHA-256 checked). With it: every ``*.onnx`` in the folder, scale and variant read from the
-    model's metadata (:class:`OnnxEngine`); a model whose shape is no named variant goes by its file
-    name and is kept whatever ``variants`` says. Only ``scales`` are kept.
+    model's metadata (:class:`OnnxEngine`, :func:`infer_variant`); a model that is no named variant, or one of
+    two or more of the same variant and scale (a model beside its retrained self), goes by its file name and is
+    kept whatever ``variants`` says. Only ``scales`` are kept.
     """
     wanted = {v.upper() for v in variants}
     found: list[ModelSpec] = []
@@ -118,9 +123,12 @@ def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[
         require("onnxruntime", "VolSR models run in onnxruntime: pip install 'volsr[onnx]'")
         from volsr_core.runtime.engines import OnnxEngine
 
-        for path in paths:
-            config = OnnxEngine(path, providers=["CPUExecutionProvider"]).config
+        configs = {path: OnnxEngine(path, providers=["CPUExecutionProvider"]).config for path in paths}
+        named = Counter((infer_variant(c), c.scale) for c in configs.values())
+        for path, config in configs.items():
             variant = infer_variant(config)
+            if named[variant, config.scale] > 1:
+                variant = None
             if config.scale in scales and (variant is None or variant in wanted):
                 found.append(ModelSpec(path, variant or path.stem, int(config.scale)))
     return sorted(found, key=lambda m: (m.scale, VARIANTS.index(m.variant) if m.variant in VARIANTS else 9,
