@@ -124,11 +124,10 @@ def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[
         from volsr_core.runtime.engines import OnnxEngine
 
         configs = {path: OnnxEngine(path, providers=["CPUExecutionProvider"]).config for path in paths}
-        named = Counter((infer_variant(c), c.scale) for c in configs.values())
+        variants = {path: infer_variant(config) for path, config in configs.items()}
+        named = Counter((variants[path], config.scale) for path, config in configs.items())
         for path, config in configs.items():
-            variant = infer_variant(config)
-            if named[variant, config.scale] > 1:
-                variant = None
+            variant = variants[path] if named[variants[path], config.scale] == 1 else None
             if config.scale in scales and (variant is None or variant in wanted):
                 found.append(ModelSpec(path, variant or path.stem, int(config.scale)))
     return sorted(found, key=lambda m: (m.scale, VARIANTS.index(m.variant) if m.variant in VARIANTS else 9,
