@@ -9,8 +9,8 @@ network inputs of every call are kept. The model is then quantized statically by
 (``quantize_static``: QDQ, int8 weights per channel, uint8 activations, calibrated on the first half
 of those inputs), and both graphs run on the second half, 2 threads, interleaved: median ms per call
 of each, their ratio, and the PSNR of the int8 output against the float32 one (how much of the
-picture quantization changes; not against a ground truth). The convolutions on the history input stay in float32
-(:func:`history_convs`). Nothing is shipped from here.
+picture quantization changes; not against a ground truth). The clipped history input and what reads it stay in float32
+(:func:`history_nodes`). Nothing is shipped from here.
 """
 from __future__ import annotations
 
@@ -56,12 +56,15 @@ class Feeds(CalibrationDataReader):
         return next(self.remaining, None)
 
 
-def history_convs(path: Path) -> list[str]:
-    """The convolutions that read the clipped history input, left in float32: quantized, onnxruntime 1.31's optimizer
-    loses their input's shape when it fuses them (QLinearConv: "Input tensor must have at least 3 dimensions")."""
+def history_nodes(path: Path) -> list[str]:
+    """The Clip on the history input and every node that reads its output, left in float32: quantized, onnxruntime
+    1.31's optimizer loses the input's shape when it fuses the convolutions on it (QLinearConv: "Input tensor must
+    have at least 3 dimensions"), and a quantized reader (the U-Nets' last Add, base + residual, since the blocks of
+    16) quantizes the clipped history for them all."""
     graph = onnx.load(str(path)).graph
-    clipped = {node.output[0] for node in graph.node if node.op_type == "Clip" and node.input[0] == "history"}
-    return [node.name for node in graph.node if node.op_type == "Conv" and node.input[0] in clipped]
+    clips = [node for node in graph.node if node.op_type == "Clip" and node.input[0] == "history"]
+    clipped = {node.output[0] for node in clips}
+    return [node.name for node in clips] + [node.name for node in graph.node if set(node.input) & clipped]
 
 
 def session(path: Path) -> ort.InferenceSession:
@@ -101,7 +104,7 @@ def main() -> None:
             quant_pre_process(str(path), str(prepared), skip_symbolic_shape=True)
             quantize_static(str(prepared), str(quantized), Feeds(recorder.feeds[:half]), quant_format=QuantFormat.QDQ,
                             per_channel=True, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                            nodes_to_exclude=history_convs(prepared))
+                            nodes_to_exclude=history_nodes(prepared))
             sessions = {"float32": session(path), "int8": session(quantized)}
             times: dict[str, list[float]] = {name: [] for name in sessions}
             scores = []

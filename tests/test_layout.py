@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from volsr_core.runtime.layout import to_channels_first, to_image_clipped
+from volsr_core.runtime.layout import clip_with_window, to_channels_first, to_image_clipped
 
 
 def test_channels_first_is_numpys_join_and_transpose_into_the_buffer_given():
@@ -23,6 +23,29 @@ def test_image_clipped_is_the_transposed_output_clipped_to_0_1():
     assert image.shape == (29, 41, 3) and image.flags.c_contiguous
     assert np.array_equal(image, np.clip(planes.transpose(1, 2, 0), 0.0, 1.0))
     assert image.min() == 0.0 and image.max() == 1.0, "the fixture reaches past both ends"
+
+
+def test_channels_first_reads_a_window_of_a_packed_frame_in_place():
+    """A window of channels 3..5 of a packed (H, W, 15) buffer, a view with a row stride of 15 floats a pixel, laid
+    out as its contiguous copy's transpose."""
+    packed = np.random.default_rng(3).random((40, 50, 15), dtype=np.float32)
+    window = packed[7:31, 12:45, 3:6]
+    assert not window.flags.c_contiguous
+    assert np.array_equal(to_channels_first([window, packed[7:31, 12:45, 9:10]]),
+                          np.concatenate([window, packed[7:31, 12:45, 9:10]], -1).transpose(2, 0, 1))
+
+
+def test_clip_with_window_writes_the_planes_over_their_window_and_clips_the_rest_in_place():
+    rng = np.random.default_rng(4)
+    image = rng.normal(0.5, 0.6, size=(30, 44, 3)).astype(np.float32)
+    planes = rng.normal(0.5, 0.6, size=(3, 12, 20)).astype(np.float32)
+    expected = image.copy()
+    expected[9:21, 16:36] = planes.transpose(1, 2, 0)
+    out = clip_with_window(image, planes, top=9, left=16)
+    assert out is image and np.array_equal(image, np.clip(expected, 0.0, 1.0))
+    assert np.array_equal(clip_with_window(image.copy(), np.empty((3, 0, 0), np.float32)), image)
+    with pytest.raises(ValueError, match=r"do not lie"):
+        clip_with_window(image, planes, top=20, left=16)  # rows 20..31 of 30
 
 
 def test_the_history_feeds_parts_join_to_the_history_it_gives():

@@ -31,14 +31,16 @@ def test_the_window_holds_what_the_frame_or_the_base_shows_widened_and_aligned()
 
 
 class CountingEngine:
-    """A real engine whose calls are counted and whose inputs' LR sizes are kept."""
+    """A real engine whose calls are counted, whose inputs' LR sizes are kept, and its last inputs and output."""
 
     def __init__(self, engine):
         self.engine, self.config, self.sizes = engine, engine.config, []
 
     def __call__(self, lr, motion, jitter, history=None):
         self.sizes.append(lr.shape[-2:])
-        return self.engine(lr, motion, jitter, history)
+        self.last = [np.array(value) for value in (lr, motion, jitter, history)]
+        self.output = self.engine(lr, motion, jitter, history)
+        return self.output
 
 
 def test_the_shipped_u_net_on_the_volumes_window_gives_the_whole_frames_image_where_the_volume_shows(model):
@@ -81,3 +83,36 @@ def test_the_shipped_u_net_on_the_volumes_window_gives_the_whole_frames_image_wh
     image = pipelines[0].render(away)
     assert len(engines[0].sizes) == calls and pipelines[0].upscaler.last_window == (0, 0, 0, 0)
     np.testing.assert_array_equal(image, np.broadcast_to(background, image.shape))
+
+
+def test_the_window_network_inputs_are_the_whole_frames_cut_to_it(model):
+    """On each frame of an orbit the shipped S 4x is given the window of what it took on the whole frame: the frame's
+    features stacked (``network_inputs``), its motion vectors (zeros on the first frame) and jitter, and the TAAU
+    estimate's pixels; where the window lies the image is the network's output clipped to [0, 1]."""
+    pytest.importorskip("onnxruntime")
+    from volsr_core.io import make_phantom
+    from volsr_core.runtime.engines import OnnxEngine
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.runtime.upscaler import network_inputs
+    from volsr_core.scene import Volume, get_preset
+    from volsr_core.scene.camera import Camera
+    from volsr_core.scene.camera_paths import orbit
+
+    volume = Volume.from_record(make_phantom(shape=(48, 48, 48)))
+    pipeline = Pipeline(volume, get_preset("CT-Phantom"), model, scale=4, size=(256, 256), threads=2)
+    engine = pipeline.upscaler.engine = CountingEngine(OnnxEngine(model, providers=["CPUExecutionProvider"]))
+    start = Camera.framing(volume.bounds).dolly(0.45).reset_clipping_range(volume.bounds)
+    for index, camera in enumerate(orbit(start, 3, degrees=4.0)):
+        image = pipeline.render(camera)
+        frame = pipeline.last_low_resolution
+        top, bottom, left, right = pipeline.upscaler.last_window
+        assert 0 < (bottom - top) * (right - left) < 0.8 * 64 * 64
+        lr, motion, jitter, history = engine.last
+        rows, columns = slice(top, bottom), slice(left, right)
+        np.testing.assert_array_equal(lr[0, 0], network_inputs(frame, engine.config.features)[:, rows, columns])
+        vectors = frame.motion[rows, columns].transpose(2, 0, 1) if index else np.zeros_like(motion[0, 0])
+        np.testing.assert_array_equal(motion[0, 0], vectors)
+        np.testing.assert_array_equal(jitter, np.float32(frame.jitter)[None, None])
+        assert history.shape == (1, 3, 4 * (bottom - top), 4 * (right - left))
+        window = image[4 * top:4 * bottom, 4 * left:4 * right]
+        np.testing.assert_array_equal(window, np.clip(engine.output[0].transpose(1, 2, 0), 0.0, 1.0))

@@ -77,7 +77,8 @@ def content_window(alpha: np.ndarray, base: np.ndarray | None, background, scale
                    align: int = WINDOW_ALIGN) -> tuple[int, int, int, int]:
     """The LR window (top, bottom, left, right; bottom and right exclusive) holding every LR pixel where ``alpha``
     (h, w: the LR frame's accumulated opacity) is above 0 or ``base`` (C >= 3, h * scale, w * scale: the HR image
-    the network refines as planes, RGB first) differs from ``background`` (RGB), widened by ``margin`` LR pixels
+    the network refines as planes, RGB first, strided as it comes: an (H, W, C) image's ``transpose(2, 0, 1)`` is read
+    in place) differs from ``background`` (RGB), widened by ``margin`` LR pixels
     each way, its corners moved out to multiples of ``align`` and clipped to the frame; (0, 0, 0, 0) where nothing
     shows. ``base`` None: an estimate known to be the background beyond one LR pixel from where ``alpha`` is above 0
     (the layered TAAU's: it composites its slabs only where one shows within a 3x3 LR neighbourhood), which is not
@@ -86,7 +87,7 @@ def content_window(alpha: np.ndarray, base: np.ndarray | None, background, scale
     extents = np.empty((h, 2), dtype=np.int64)
     if base is None:
         base, margin = np.zeros((3, 0, 0), dtype=np.float32), margin + 1
-    _row_extents(np.ascontiguousarray(alpha, dtype=np.float32), np.ascontiguousarray(base, dtype=np.float32),
+    _row_extents(np.ascontiguousarray(alpha, dtype=np.float32), np.asarray(base, dtype=np.float32),
                  np.asarray(background, dtype=np.float32)[:3], int(scale), extents)
     rows = np.flatnonzero(extents[:, 1] >= extents[:, 0])
     if rows.size == 0:

@@ -3,7 +3,8 @@
 Images are (H, W, C), channels last (docs/conventions.md); the ONNX networks take and give (C, H, W). On a
 512² frame numpy's joining and transposing copies of TAAU's 7-channel history and the network's output (strided
 reads, one thread) cost 7-10 ms around a ~20 ms network; here each is one parallel pass over rows, 1.6-2.1 ms
-together (``benchmarks/bench_layout.py``).
+together (``benchmarks/bench_layout.py``). The images may be strided views (a window of a frame's buffers, a feature
+of its packed array): each kernel reads them in place, no contiguous copy first.
 """
 from __future__ import annotations
 
@@ -34,10 +35,10 @@ def _to_image_clipped(planes: np.ndarray, out: np.ndarray) -> None:
 
 
 def to_channels_first(images: Sequence[np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
-    """``images``, each (H, W, c), as one contiguous (C, H, W) float32 array holding their channels one after the
-    other (what ``np.concatenate(images, -1).transpose(2, 0, 1)`` holds, without the joined copy), written into
-    ``out`` when given (a buffer kept between frames: fresh multi-MB arrays cost page faults)."""
-    images = [np.ascontiguousarray(image, dtype=np.float32) for image in images]
+    """``images``, each (H, W, c) and strided as they come, as one contiguous (C, H, W) float32 array holding their
+    channels one after the other (what ``np.concatenate(images, -1).transpose(2, 0, 1)`` holds, without the joined
+    copy), written into ``out`` when given (a buffer kept between frames: fresh multi-MB arrays cost page faults)."""
+    images = [np.asarray(image, dtype=np.float32) for image in images]
     height, width = images[0].shape[:2]
     shape = (sum(image.shape[2] for image in images), height, width)
     if any(image.shape[:2] != (height, width) for image in images):
@@ -60,3 +61,31 @@ def to_image_clipped(planes: np.ndarray) -> np.ndarray:
     out = np.empty(planes.shape[1:] + planes.shape[:1], np.float32)
     _to_image_clipped(planes, out)
     return out
+
+
+@numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
+def _clip_with_window(image: np.ndarray, planes: np.ndarray, top: int, left: int) -> None:
+    height, width, channels = image.shape
+    rows, columns = planes.shape[1], planes.shape[2]
+    low, high = np.float32(0.0), np.float32(1.0)
+    for y in numba.prange(height):
+        inside = top <= y < top + rows
+        for x in range(width):
+            if inside and left <= x < left + columns:
+                for c in range(channels):
+                    image[y, x, c] = min(max(planes[c, y - top, x - left], low), high)
+            else:
+                for c in range(channels):
+                    image[y, x, c] = min(max(image[y, x, c], low), high)
+
+
+def clip_with_window(image: np.ndarray, planes: np.ndarray, top: int = 0, left: int = 0) -> np.ndarray:
+    """``image`` (H, W, C) float32, in place and returned: ``planes`` (C, h, w) over its window of rows ``top`` ..
+    ``top`` + h - 1 and columns ``left`` .. ``left`` + w - 1, the rest its own, all clipped to [0, 1]; one parallel
+    pass (what a network's output on a window of the image it refines becomes before anyone sees it)."""
+    height, width, channels = image.shape
+    if planes.shape[0] != channels or not (0 <= top <= top + planes.shape[1] <= height
+                                           and 0 <= left <= left + planes.shape[2] <= width):
+        raise ValueError(f"planes {planes.shape} at ({top}, {left}) do not lie in an image of shape {image.shape}")
+    _clip_with_window(image, np.asarray(planes, dtype=np.float32), int(top), int(left))
+    return image

@@ -15,7 +15,7 @@ import numpy as np
 from volsr_core.render.features import FeatureFrame
 from volsr_core.runtime.base_filter import Scratch, filter_image
 from volsr_core.runtime.content_window import content_window
-from volsr_core.runtime.layout import to_channels_first, to_image_clipped
+from volsr_core.runtime.layout import clip_with_window, to_channels_first, to_image_clipped
 from volsr_core.scene.camera import Camera, rotation_between
 from volsr_core.sr.history import HistoryFeed, history_mode
 from volsr_core.temporal.resample import resize_bicubic, upscale_bilinear
@@ -182,7 +182,8 @@ class StatefulUpscaler:
             self._device_scratch = DeviceScratch()  # on the GPU: TAAU's estimate, the camera-cut check's sample
         self._scratch = Scratch()  # work buffers kept between frames: the base filter's, the network's history
         # a network that refines TAAU's estimate from the current frame alone reads nothing outside its receptive field
-        self.skip_background = bool(skip_background) and self.config.taau_base and self.config.previous_frames == 0
+        self.skip_background = (bool(skip_background) and history_mode(self.config) == "taau"
+                                and self.config.previous_frames == 0)
         # the LR window the network last ran on (bottom and right exclusive; (0, 0, 0, 0): nowhere), None before
         self.last_window: tuple[int, int, int, int] | None = None
         self.resets = 0
@@ -245,6 +246,8 @@ class StatefulUpscaler:
         slabs over."""
         if self.base_filter is not None:
             return self._filtered(frame, background)
+        if self.skip_background:
+            return self._refined(frame, background)
         inputs = network_inputs(frame, self.config.features)
         motion = np.ascontiguousarray(frame.motion, dtype=np.float32).transpose(2, 0, 1)
         jitter = np.asarray(frame.jitter, dtype=np.float32)
@@ -265,34 +268,53 @@ class StatefulUpscaler:
         if parts is not None:  # (1, C, H, W) in a buffer kept between frames: the engine reads it during the call
             shape = (sum(part.shape[2] for part in parts),) + parts[0].shape[:2]
             history = to_channels_first(parts, self._scratch.get("history", shape))[None]
-        if history is not None and self.skip_background:
-            out = self._on_content(frame, lr, vectors, jitters, history, background)
-        else:
-            out = self.engine(lr, vectors, jitters, history)[0]  # (3, H, W)
+        out = self.engine(lr, vectors, jitters, history)[0]  # (3, H, W)
         self.history.keep(out.transpose(1, 2, 0))
         return self._stretched(to_image_clipped(out))
 
-    def _on_content(self, frame: FeatureFrame, lr: np.ndarray, vectors: np.ndarray, jitters: np.ndarray,
-                    history: np.ndarray, background: Sequence[float]) -> np.ndarray:
-        """The network's (3, H, W) output for a TAAU-based network (``history`` (1, C, H, W): the estimate first),
-        run on the frame's content window alone (see the class): the estimate outside it, written into ``history``'s
-        first three planes (the engine is done with them)."""
-        scale = self.config.scale
-        estimate = history[0, :3]
+    def _window_buffer(self, name: str, shape: tuple[int, ...], frame_size: int) -> np.ndarray:
+        """A contiguous float32 array of ``shape`` at the start of the kept buffer ``name`` of ``frame_size`` floats
+        (the whole frame's, what a window holds at most): windows of every size share it, no new array a frame."""
+        return self._scratch.get(name, (frame_size,))[:math.prod(shape)].reshape(shape)
+
+    def _refined(self, frame: FeatureFrame, background: Sequence[float]) -> np.ndarray:
+        """:meth:`upscale` for a TAAU-based network without previous frames (:attr:`skip_background`): TAAU's
+        estimate, the network run on the frame's content window alone (see the class; the whole frame where the
+        window holds more than :data:`WINDOW_SHARE` of it) and its output written over the estimate there, clipped
+        to [0, 1] with it in one pass. The network's inputs, history and output are the window's alone, laid out
+        channels first from views of the frame's buffers and the estimate into buffers kept between frames."""
+        colour, scale = frame.color, self.config.scale
+        motion = frame.motion if self._continues(frame, colour) else _no_motion(frame.motion.shape)
+        jitter = np.asarray(frame.jitter, dtype=np.float32)
+        self.frames.appendleft((colour, motion, jitter))
+        parts = self.history.parts(colour, motion, tuple(frame.jitter), frame.motion_depth,
+                                   view_rotation(frame.camera, frame.previous_camera), frame.pixels_per_voxel,
+                                   slabs=frame.slabs, background=background)
+        estimate = parts[0]  # (H, W, 3), a new array each frame (the TAAU keeps its own history): the image returned
+        h, w = colour.shape[:2]
         # the layered TAAU's estimate is the background away from the frame's alpha: only a one-layer TAAU's is read
-        top, bottom, left, right = content_window(frame.alpha, None if self.slabs else estimate, background, scale)
-        h, w = lr.shape[-2:]
+        top, bottom, left, right = content_window(frame.alpha, None if self.slabs else estimate.transpose(2, 0, 1),
+                                                  background, scale)
         if (bottom - top) * (right - left) > WINDOW_SHARE * h * w:
-            self.last_window = (0, h, 0, w)
-            return self.engine(lr, vectors, jitters, history)[0]
+            top, bottom, left, right = 0, h, 0, w
         self.last_window = (top, bottom, left, right)
-        if bottom > top and right > left:
-            rows, columns = slice(top, bottom), slice(left, right)
-            hr_rows, hr_columns = slice(top * scale, bottom * scale), slice(left * scale, right * scale)
-            estimate[:, hr_rows, hr_columns] = self.engine(
-                np.ascontiguousarray(lr[..., rows, columns]), np.ascontiguousarray(vectors[..., rows, columns]),
-                jitters, np.ascontiguousarray(history[..., hr_rows, hr_columns]))[0]
-        return estimate
+        if bottom <= top or right <= left:  # nothing shows: the estimate is the background
+            clip_with_window(estimate, np.empty((3, 0, 0), np.float32))
+            return self._stretched(estimate)
+        rows, columns = slice(top, bottom), slice(left, right)
+        hr_rows, hr_columns = slice(top * scale, bottom * scale), slice(left * scale, right * scale)
+        planes = [np.asarray(getattr(frame, name))[rows, columns] for name in self.config.features]
+        planes = [plane[..., None] if plane.ndim == 2 else plane for plane in planes]
+        window, hr_window = (bottom - top, right - left), ((bottom - top) * scale, (right - left) * scale)
+        lr_channels, hr_channels = sum(plane.shape[2] for plane in planes), sum(part.shape[2] for part in parts)
+        lr = to_channels_first(planes, self._window_buffer("lr", (lr_channels,) + window, lr_channels * h * w))
+        vectors = to_channels_first([motion[rows, columns]], self._window_buffer("motion", (2,) + window, 2 * h * w))
+        history = to_channels_first([part[hr_rows, hr_columns] for part in parts], self._window_buffer(
+            "history", (hr_channels,) + hr_window, hr_channels * h * w * scale * scale))
+        out = self.engine(lr[None, None], vectors[None, None], jitter[None, None], history[None])[0]
+        image = clip_with_window(estimate, out, top * scale, left * scale)
+        self.history.keep(image)
+        return self._stretched(image)
 
     def _stretched(self, image):
         """``image`` (H, W, 3) stretched by :attr:`stretch` (Keys' cubic, :data:`STRETCH_CUBIC_A`, clamped to [0, 1])
