@@ -6,11 +6,10 @@
 For each shipped U-Net model (XS is a filter, not a graph onnxruntime runs) the frames of an orbit
 (2° per frame, the volume filling the view) go through ``Pipeline`` with the float32 model; the
 network inputs of every call are kept. The model is then quantized statically by onnxruntime
-(``quantize_static``: QDQ, int8 weights per channel, uint8 activations, calibrated on the first half
-of those inputs), and both graphs run on the second half, 2 threads, interleaved: median ms per call
-of each, their ratio, and the PSNR of the int8 output against the float32 one (how much of the
-picture quantization changes; not against a ground truth). The clipped history input and what reads it stay in float32
-(:func:`history_nodes`). Nothing is shipped from here.
+(:func:`~volsr_core.runtime.quantize.quantize_int8`, as ``training/quantize_model.py`` ships them, but
+calibrated on the first half of those inputs), and both graphs run on the second half, 2 threads,
+interleaved: median ms per call of each, their ratio, and the PSNR of the int8 output against the float32 one (how
+much of the picture quantization changes; not against a ground truth). Nothing is shipped from here.
 """
 from __future__ import annotations
 
@@ -21,50 +20,16 @@ import time
 from pathlib import Path
 
 import numpy as np
-import onnx
 import onnxruntime as ort
-from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
-from onnxruntime.quantization.shape_inference import quant_pre_process
 
 from volsr_core.apps.bench.scenes import load_bench_volume
 from volsr_core.runtime.models import model_file, shipped_models
 from volsr_core.runtime.pipeline import Pipeline
+from volsr_core.runtime.quantize import FeedRecorder, quantize_int8
 from volsr_core.scene.camera_paths import orbit_around
 from volsr_core.sr.metrics import psnr_ssim
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "volumes"
-
-
-class Recorder:
-    """An engine stand-in that keeps the inputs of every call (as the ONNX graph's feed) and runs the engine."""
-
-    def __init__(self, engine):
-        self.engine, self.config, self.feeds = engine, engine.config, []
-
-    def __call__(self, lr, motion, jitter, history=None):
-        values = {"lr": lr, "motion": motion, "jitter": jitter, "history": history}
-        self.feeds.append({name: np.ascontiguousarray(values[name], dtype=np.float32)
-                           for name in self.engine.input_names})
-        return self.engine(lr, motion, jitter, history)
-
-
-class Feeds(CalibrationDataReader):
-    def __init__(self, feeds: list[dict]):
-        self.remaining = iter(feeds)
-
-    def get_next(self):
-        return next(self.remaining, None)
-
-
-def history_nodes(path: Path) -> list[str]:
-    """The Clip on the history input and every node that reads its output, left in float32: quantized, onnxruntime
-    1.31's optimizer loses the input's shape when it fuses the convolutions on it (QLinearConv: "Input tensor must
-    have at least 3 dimensions"), and a quantized reader (the U-Nets' last Add, base + residual, since the blocks of
-    16) quantizes the clipped history for them all."""
-    graph = onnx.load(str(path)).graph
-    clips = [node for node in graph.node if node.op_type == "Clip" and node.input[0] == "history"]
-    clipped = {node.output[0] for node in clips}
-    return [node.name for node in clips] + [node.name for node in graph.node if set(node.input) & clipped]
 
 
 def session(path: Path) -> ort.InferenceSession:
@@ -92,19 +57,15 @@ def main() -> None:
     for entry in shipped_models():
         if entry["variant"] not in wanted:
             continue
-        path = model_file(entry["variant"], entry["scale"])
+        path = model_file(entry["variant"], entry["scale"])  # the float32 file, whatever runs on the CPU
         pipeline = Pipeline(scene.volume, scene.transfer_function, path, scale=entry["scale"],
                             size=(args.size, args.size), threads=2)
-        recorder = pipeline.upscaler.engine = Recorder(pipeline.engine)
+        recorder = pipeline.upscaler.engine = FeedRecorder(pipeline.engine)
         for camera in orbit_around(pipeline.caster.visible_bounds(), args.frames, 2.0):
             pipeline.render(camera)
         half = len(recorder.feeds) // 2
         with tempfile.TemporaryDirectory() as folder:
-            prepared, quantized = Path(folder) / "prepared.onnx", Path(folder) / "int8.onnx"
-            quant_pre_process(str(path), str(prepared), skip_symbolic_shape=True)
-            quantize_static(str(prepared), str(quantized), Feeds(recorder.feeds[:half]), quant_format=QuantFormat.QDQ,
-                            per_channel=True, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                            nodes_to_exclude=history_nodes(prepared))
+            quantized = quantize_int8(path, Path(folder) / "int8.onnx", recorder.feeds[:half])
             sessions = {"float32": session(path), "int8": session(quantized)}
             times: dict[str, list[float]] = {name: [] for name in sessions}
             scores = []

@@ -42,6 +42,23 @@ def test_eval_writes_the_report_for_every_method(tiny_sequences, tmp_path, capsy
     assert "| **all** |" in (tmp_path / "r" / "eval.md").read_text()
 
 
+def test_eval_of_the_onnx_file_gives_the_pytorch_models_numbers(tiny_sequences, tmp_path):
+    """``volsr eval`` of a model's ONNX export (run by onnxruntime, as hosts run it) scores what its .pt scores."""
+    pytest.importorskip("onnxruntime")
+    from volsr_core.runtime.export import export_onnx
+
+    model = SuperResolutionNet(NetworkConfig(scale=4, previous_frames=2, fold=4, widths=(8, 12)))
+    save_checkpoint(tmp_path / "model.pt", model)
+    export_onnx(model, tmp_path / "model.onnx")
+    overall = {}
+    for name in ("model.pt", "model.onnx"):
+        assert main(["eval", str(tmp_path / name), "--data", str(tiny_sequences), "--out", str(tmp_path / f"report-{name}")]) == 0
+        overall[name] = json.loads((tmp_path / f"report-{name}" / "eval.json").read_text())["overall"]
+    assert overall["model.pt"].keys() == overall["model.onnx"].keys()
+    for method, scores in overall["model.pt"].items():
+        assert overall["model.onnx"][method]["psnr"] == pytest.approx(scores["psnr"], abs=1e-3), method
+
+
 def test_model_files_load_only_when_they_are_what_they_claim(tmp_path):
     model = SuperResolutionNet(NetworkConfig(scale=2, previous_frames=1, fold=2, widths=(8, 12)))
     save_checkpoint(tmp_path / "m.pt", model, extra={"note": "test"})

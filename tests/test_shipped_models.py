@@ -43,6 +43,20 @@ def test_the_default_is_xs_2x_and_a_scale_alone_takes_the_smallest_model_shipped
     assert Pipeline(volume, tf, scale=4, variant="S", size=(32, 32)).engine.path.name == "volsr-S-4x.onnx"
 
 
+def test_the_cpu_runs_the_8_bit_file_where_one_ships_and_a_gpu_the_float32_one():
+    """S 2x ships an 8-bit ONNX file (training/quantize_model.py): the file hosts, ``volsr upscale`` and ``volsr bench``
+    run on the CPU; S 4x ships none (its 8-bit copy lay too far from its output) and runs its float32 file."""
+    entry = models.find_model("S", 2)
+    assert entry["files"][models.INT8_KIND] == "volsr-S-2x.int8.onnx"
+    assert models.model_file_to_run("S", 2).name == "volsr-S-2x.int8.onnx"
+    assert models.model_file_to_run("S", 2, device="cuda").name == "volsr-S-2x.onnx"
+    assert models.model_file_to_run("S", 4).name == "volsr-S-4x.onnx"
+    volume = Volume.from_record(make_phantom(shape=(32, 32, 32)))
+    pipeline = Pipeline(volume, get_preset("CT-Phantom"), scale=2, variant="S", size=(32, 32))
+    assert pipeline.engine.path.name == "volsr-S-2x.int8.onnx"
+    assert pipeline.engine.config == OnnxEngine(models.model_file("S", 2)).config
+
+
 @pytest.mark.parametrize("entry", SHIPPED, ids=[m["name"] for m in SHIPPED])
 def test_a_shipped_model_is_small_checked_and_its_two_files_agree(entry):
     onnx_path = models.model_file(entry["variant"], entry["scale"], "onnx")
@@ -58,6 +72,10 @@ def test_a_shipped_model_is_small_checked_and_its_two_files_agree(entry):
         expected = net(*inputs).numpy()
     assert np.abs(engine(*(x.numpy() for x in inputs)) - expected).max() <= 1e-4
     assert (models.models_dir() / entry["files"]["card"]).is_file()
+    if models.INT8_KIND in entry["files"]:  # SHA-256 checked, small, the same network
+        int8_path = models.model_file(entry["variant"], entry["scale"], models.INT8_KIND)
+        assert int8_path.stat().st_size <= 10 * 2**20
+        assert OnnxEngine(int8_path, providers=["CPUExecutionProvider"]).config == net.config
 
 
 def test_a_damaged_shipped_file_is_refused_with_one_line(tmp_path, monkeypatch):
@@ -96,13 +114,17 @@ def phantom_orbit():
     return volume, tf, caster, cameras, truth
 
 
-@pytest.mark.parametrize("entry", SHIPPED, ids=[m["name"] for m in SHIPPED])
-def test_a_shipped_model_beats_bilinear_on_a_phantom_orbit(entry, phantom_orbit):
-    """Each shipped model through the Pipeline (ONNX, CPU) against the same LR size rendered at the
-    pixel centres and stretched bilinearly (VTK's reduced-size rendering), on the same frames."""
+SHIPPED_FILES = [(m, "onnx") for m in SHIPPED] + [(m, models.INT8_KIND) for m in SHIPPED if models.INT8_KIND in m["files"]]
+
+
+@pytest.mark.parametrize("entry, kind", SHIPPED_FILES, ids=[m["files"][kind] for m, kind in SHIPPED_FILES])
+def test_a_shipped_model_beats_bilinear_on_a_phantom_orbit(entry, kind, phantom_orbit):
+    """Each shipped model's ONNX file (float32, and the 8-bit one where it ships) through the Pipeline (CPU) against
+    the same LR size rendered at the pixel centres and stretched bilinearly (VTK's reduced-size rendering), on the same
+    frames, above the model's floor."""
     volume, tf, caster, cameras, truth = phantom_orbit
     scale = entry["scale"]
-    pipeline = Pipeline(volume, tf, models.model_file(entry["variant"], scale, "onnx"), scale=scale,
+    pipeline = Pipeline(volume, tf, models.model_file(entry["variant"], scale, kind), scale=scale,
                         size=(SIZE, SIZE), threads=2)
     bilinear = ReducedSize(caster, (SIZE, SIZE), scale, "bilinear")
     volsr_psnr, bilinear_psnr = [], []
@@ -111,6 +133,6 @@ def test_a_shipped_model_beats_bilinear_on_a_phantom_orbit(entry, phantom_orbit)
         if t >= FRAMES - SCORED:
             volsr_psnr.append(psnr_ssim(upscaled, truth[t], channel_axis=2)[0])
             bilinear_psnr.append(psnr_ssim(stretched, truth[t], channel_axis=2)[0])
-    print(f"{entry['name']}: VolSR {np.round(volsr_psnr, 2)} dB, bilinear {np.round(bilinear_psnr, 2)} dB")
+    print(f"{entry['files'][kind]}: VolSR {np.round(volsr_psnr, 2)} dB, bilinear {np.round(bilinear_psnr, 2)} dB")
     assert all(v > b for v, b in zip(volsr_psnr, bilinear_psnr)), "VolSR must beat bilinear on every scored frame"
     assert min(volsr_psnr) >= PSNR_FLOOR[entry["name"]]

@@ -19,12 +19,14 @@ MODELS = REPO / "resources" / "models"
 SECTION = "## Cost per frame"
 
 
-def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
-    """The card section for the model whose ONNX file is named ``model_file``, from bench.json files (the
-    distance to the curve is the one the run's own target check worked out, ``targets``)."""
+def cost_section(model_files: set[str], bench_paths: list[Path]) -> list[str]:
+    """The card section for the model whose ONNX files (float32, and 8-bit where it ships) are named
+    ``model_files``, from bench.json files (the distance to the curve is the one the run's own target check worked
+    out, ``targets``)."""
     lines = [SECTION, "",
              "Medians over the timed frames of `volsr bench` (those after the warm-up in each of its timing passes "
-             "over the orbit: 24 a method by default; ONNX Runtime, CPU, 2 threads, on the window of the frame "
+             "over the orbit: 24 a method by default; ONNX Runtime, CPU, 2 threads, the 8-bit file where the model "
+             "ships one, on the window of the frame "
              "where the volume shows (`StatefulUpscaler(skip_background=True)`), or for variant XS its "
              "numba filter kernel, on the project's "
              "2-core machine; the LR render is the ray caster's; \"K slabs\": rendered in K depth slabs, the layered "
@@ -43,7 +45,7 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
             if native is None:
                 continue
             points = bench["targets"][scene]["above_bilinear"]["points"]
-            for mine in (r for r in rows if r["method"] == "volsr" and r["model"] == model_file):
+            for mine in (r for r in rows if r["method"] == "volsr" and r["model"] in model_files):
                 margin = next(p["margin_db"] for p in points if p["label"] == mine["label"])
                 slabs = mine.get("slabs", 0)  # runs before the slabs were recorded had none
                 stretch = mine.get("stretch", 1)  # and none was stretched
@@ -55,10 +57,11 @@ def cost_section(model_file: str, bench_paths: list[Path]) -> list[str]:
     return lines + ["", f"From {sources}."]
 
 
-def replace_section(card: str, section: list[str]) -> str:
-    """``card`` with its cost section (up to the next "## " heading or the end) replaced, or appended."""
+def replace_section(card: str, section: list[str], heading: str = SECTION) -> str:
+    """``card`` with its section ``heading`` (up to the next "## " heading or the end) replaced by ``section``, or
+    ``section`` appended."""
     body = "\n".join(section) + "\n"
-    match = re.search(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", card, flags=re.S | re.M)
+    match = re.search(rf"^{re.escape(heading)}\n.*?(?=^## |\Z)", card, flags=re.S | re.M)
     if match is None:
         return card.rstrip("\n") + "\n\n" + body
     return card[: match.start()] + body + ("\n" if match.end() < len(card) else "") + card[match.end():]
@@ -72,7 +75,8 @@ def main() -> None:
     args = parser.parse_args()
     for entry in json.loads((MODELS / "models.json").read_text())["models"]:
         card_path = MODELS / entry["files"]["card"]
-        card = replace_section(card_path.read_text(), cost_section(entry["files"]["onnx"], args.bench))
+        files = {entry["files"][kind] for kind in ("onnx", "onnx_int8") if kind in entry["files"]}
+        card = replace_section(card_path.read_text(), cost_section(files, args.bench))
         with atomic_write(card_path, "w") as fh:
             fh.write(card)
         print(f"{card_path.relative_to(REPO)}: cost section from {len(args.bench)} runs")

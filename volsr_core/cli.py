@@ -176,11 +176,15 @@ def cmd_train(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     for module in ("torch", "skimage", "matplotlib"):
         require_extra(module, "volsr eval")
-    from volsr_core.apps.evaluate import evaluate, write_report
+    from volsr_core.apps.evaluate import OnnxNetwork, evaluate, write_report
     from volsr_core.sr.checkpoint import load_model
 
     output_folder(args.out)
-    model = load_model(args.model)
+    if Path(args.model).suffix == ".onnx":
+        require_extra("onnxruntime", "volsr eval of an ONNX file")
+        model = OnnxNetwork(args.model)
+    else:
+        model = load_model(args.model)
     results, showcase = evaluate(model, args.data, args.split)
     written = write_report(results, showcase, args.out)
     for name in results["methods"]:
@@ -205,7 +209,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
     from volsr_core.images import require_video
     from volsr_core.render import RayCaster
     from volsr_core.runtime.engines import open_engine
-    from volsr_core.runtime.models import model_file
+    from volsr_core.runtime.models import model_file_to_run
     from volsr_core.runtime.pipeline import Pipeline, auto_stretches
     from volsr_core.runtime.upscaler import takes_slabs
     from volsr_core.scene.camera_paths import read_camera_path
@@ -251,7 +255,7 @@ def cmd_upscale(args: argparse.Namespace) -> int:
         scale = scale or DEFAULT_SCALE
         variant = variant or default_variant(scale)
         if variant != "auto" and args.budget_ms is None:
-            model = model_file(variant, scale)
+            model = model_file_to_run(variant, scale, args.device)
     if args.slabs and args.budget_ms is not None:
         raise InputError("--slabs", "--budget-ms runs each model with its own depth slabs; give --slabs without it")
     if model is not None:  # opened once, before any rendering: a missing extra or a bad file stops here
@@ -574,7 +578,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     ev = sub.add_parser("eval", help="the network vs bilinear, bicubic and TAAU on a dataset split: JSON, "
                         "markdown table, plots, zoomed crops")
-    ev.add_argument("model", help="model file (best.pt) or training checkpoint")
+    ev.add_argument("model", help="model file (best.pt), training checkpoint, or ONNX file (run by onnxruntime on the "
+                    "CPU, as hosts run it: an 8-bit one too)")
     ev.add_argument("--data", required=True, metavar="DIR", help="dataset folder (volsr dataset)")
     ev.add_argument("--split", default="test", choices=("train", "val", "test"), help="[test]")
     ev.add_argument("--out", default="out/eval", metavar="DIR", help="report folder [out/eval]")

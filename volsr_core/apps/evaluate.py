@@ -92,8 +92,27 @@ def _baselines(video: VideoFrames, scale: int) -> dict[str, Callable[[int], np.n
     return methods
 
 
+class OnnxNetwork:
+    """An ONNX model file behind the calls :func:`evaluate` makes of a SuperResolutionNet (``config``, ``eval()``,
+    torch tensors in and out), run by onnxruntime on the CPU: the file hosts run, an 8-bit one among them."""
+
+    def __init__(self, path: str | os.PathLike):
+        from volsr_core.runtime.engines import OnnxEngine
+
+        self.engine = OnnxEngine(path, providers=["CPUExecutionProvider"])
+        self.config = self.engine.config
+
+    def eval(self) -> "OnnxNetwork":
+        return self
+
+    def __call__(self, lr: torch.Tensor, motion: torch.Tensor, jitter: torch.Tensor,
+                 history: torch.Tensor | None = None) -> torch.Tensor:
+        return torch.from_numpy(self.engine(lr.numpy(), motion.numpy(), jitter.numpy(),
+                                            None if history is None else history.numpy()))
+
+
 @torch.no_grad()
-def evaluate(model: SuperResolutionNet, data_root: str | os.PathLike, split: str = "test",
+def evaluate(model: SuperResolutionNet | OnnxNetwork, data_root: str | os.PathLike, split: str = "test",
              progress: bool = True) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Metrics per video, method and frame, plus per-method means over all evaluated frames.
 

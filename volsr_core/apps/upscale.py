@@ -159,7 +159,7 @@ def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: s
     one 8x model is a U-Net, a CPU takes XS 4x stretched 2x, as ``volsr upscale --scale 8`` does by default.
     """
     from volsr_core.runtime.engines import open_engine
-    from volsr_core.runtime.models import find_model, model_file, shipped_models
+    from volsr_core.runtime.models import find_model, model_file_to_run, shipped_models
     from volsr_core.runtime.pipeline import stretch_steps
 
     shipped = {(e["variant"], e["scale"]) for e in shipped_models()}
@@ -172,7 +172,7 @@ def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: s
     budget = PAYING_NETWORK_SHARE * lr_ms
     measured: dict[tuple[str, int], float] = {}
     for variant, k in candidates:
-        engine = open_engine(model_file(variant, scale // k), device=device)
+        engine = open_engine(model_file_to_run(variant, scale // k, device), device=device)
         measured[variant, k] = network_ms(engine, lr_size)
         if measured[variant, k] <= budget:
             break
@@ -184,7 +184,7 @@ def auto_variant(caster, camera, size: tuple[int, int], scale: int, *, device: s
     times = ", ".join(f"{named(v, s)} {ms:.0f} ms" for (v, s), ms in measured.items())
     log(f"variant auto: network per {size[0]}x{size[1]} frame {times}; budget {budget:.0f} ms "
         f"({PAYING_NETWORK_SHARE:g} of the {lr_size[0]}x{lr_size[1]} LR render, {lr_ms:.0f} ms) -> {named(variant, k)}")
-    return variant, model_file(variant, scale // k), k
+    return variant, model_file_to_run(variant, scale // k, device), k
 
 
 # -- one input --------------------------------------------------------------------------------------

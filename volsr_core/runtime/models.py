@@ -11,6 +11,8 @@ from volsr_core.hashing import file_sha256
 from volsr_core.sr.network_config import VARIANTS
 
 REGISTRY = "models.json"
+INT8_KIND = "onnx_int8"
+"""The registry's name (``files`` and ``sha256``) for a model's 8-bit ONNX file (:mod:`~volsr_core.runtime.quantize`)."""
 
 DEFAULT_SCALE = 2
 """The scale every host and ``volsr upscale`` take unless told: at 2x the learned path (VolSR XS)
@@ -58,7 +60,8 @@ def find_model(variant: str = "XS", scale: int = DEFAULT_SCALE) -> dict[str, Any
 
 
 def model_file(variant: str = "XS", scale: int = DEFAULT_SCALE, kind: str = "onnx") -> Path:
-    """The path of a shipped model file (``kind`` "onnx" or "pt"), after checking its SHA-256."""
+    """The path of a shipped model file (``kind`` "onnx", "pt" or :data:`INT8_KIND`
+    where the model has one), after checking its SHA-256."""
     entry = find_model(variant, scale)
     path = models_dir() / entry["files"][kind]
     if not path.is_file():
@@ -68,3 +71,12 @@ def model_file(variant: str = "XS", scale: int = DEFAULT_SCALE, kind: str = "onn
         raise InputError(path, f"SHA-256 {actual[:16]}... does not match the registry's "
                          f"{entry['sha256'][kind][:16]}... (damaged or replaced)")
     return path
+
+
+def model_file_to_run(variant: str = "XS", scale: int = DEFAULT_SCALE, device: str = "cpu") -> Path:
+    """The ONNX file to run for the shipped model of ``variant`` at ``scale`` on ``device`` (SHA-256 checked): on the
+    CPU its 8-bit copy where one ships (:mod:`~volsr_core.runtime.quantize`; S 2x, docs/performance.md, "8-bit U-Nets
+    on the CPU"), else, and on a GPU, the float32 file. A caller
+    that wants float32 on the CPU takes :func:`model_file`."""
+    kind = INT8_KIND if device == "cpu" and INT8_KIND in find_model(variant, scale)["files"] else "onnx"
+    return model_file(variant, scale, kind)

@@ -50,7 +50,8 @@ class Pipeline(KeepsLastFrame):
     """Renders ``volume`` at 1/``scale`` of ``size`` and upscales it with ``model`` (and a bicubic ``stretch``).
 
     - ``model``: an .onnx or .pt file, an ``nn.Module``, or None for the shipped model of
-      ``variant`` at ``scale`` / ``stretch`` (resources/models, SHA-256 checked);
+      ``variant`` at ``scale`` / ``stretch`` (resources/models, SHA-256 checked; on the CPU its 8-bit ONNX file where
+      one ships, :func:`~volsr_core.runtime.models.model_file_to_run`);
     - ``scale``: the upscaling factor from the rendered frame to ``size``; None: the model's own times
       ``stretch``, or for a shipped model :data:`~volsr_core.runtime.models.DEFAULT_SCALE` (2) times ``stretch``;
       a model of a scale other than ``scale`` / ``stretch`` is an error;
@@ -262,11 +263,12 @@ def _open_model(model: Any, scale: int | None, stretch: int, variant: str | None
     error."""
     model_scale = None if scale is None else scale // stretch
     if model is None:
-        from volsr_core.runtime.models import DEFAULT_SCALE, default_variant, model_file
+        from volsr_core.runtime.models import DEFAULT_SCALE, default_variant, model_file, model_file_to_run
 
         model_scale = DEFAULT_SCALE if model_scale is None else model_scale
-        model = model_file(variant or default_variant(model_scale), model_scale,
-                           "onnx" if options["backend"] != "torch" else "pt")
+        variant = variant or default_variant(model_scale)
+        model = (model_file(variant, model_scale, "pt") if options["backend"] == "torch"
+                 else model_file_to_run(variant, model_scale, options["device"]))
     engine = open_engine(model, **options)
     if model_scale is not None and engine.config.scale != model_scale:
         raise ValueError(f"the model upscales {engine.config.scale}x, not {model_scale}x"

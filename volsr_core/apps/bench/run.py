@@ -95,11 +95,12 @@ def infer_variant(config) -> str | None:
 
 
 def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[str] = VARIANTS,
-                scales: Sequence[int] = SCALES) -> list[ModelSpec]:
+                scales: Sequence[int] = SCALES, device: str = "cpu") -> list[ModelSpec]:
     """The models to benchmark, by scale then variant.
 
     Without ``models_dir``: the shipped registry's (:func:`~volsr_core.runtime.models.shipped_models`,
-    SHA-256 checked). With it: every ``*.onnx`` in the folder, scale and variant read from the
+    SHA-256 checked), each the file hosts run on ``device`` (:func:`~volsr_core.runtime.models.model_file_to_run`:
+    on the CPU the 8-bit one where it ships). With it: every ``*.onnx`` in the folder, scale and variant read from the
     model's metadata (:class:`OnnxEngine`, :func:`infer_variant`); a model that is no named variant, or one of
     two or more of the same variant and scale (a model beside its retrained self), goes by its file name and is
     kept whatever ``variants`` says. Only ``scales`` are kept.
@@ -107,11 +108,11 @@ def find_models(models_dir: str | os.PathLike | None = None, variants: Sequence[
     wanted = {v.upper() for v in variants}
     found: list[ModelSpec] = []
     if models_dir is None:
-        from volsr_core.runtime.models import model_file, shipped_models
+        from volsr_core.runtime.models import model_file_to_run, shipped_models
 
         for entry in shipped_models():
             if entry["variant"] in wanted and entry["scale"] in scales and "onnx" in entry.get("files", {}):
-                found.append(ModelSpec(model_file(entry["variant"], entry["scale"], "onnx"), entry["variant"],
+                found.append(ModelSpec(model_file_to_run(entry["variant"], entry["scale"], device), entry["variant"],
                                        int(entry["scale"])))
     else:
         folder = Path(models_dir)
@@ -328,7 +329,7 @@ def run_benchmark(volumes: Sequence[str | None] | None = None, size: tuple[int, 
     if timing_passes < 1:
         raise InputError(None, f"need at least 1 timing pass (the scored one), got {timing_passes}")
     specs = list(volumes) if volumes else [None]
-    models = find_models(models_dir, variants, model_scales(scales, stretches))
+    models = find_models(models_dir, variants, model_scales(scales, stretches), device)
     rows_of_models = volsr_rows(models, scales, stretches)
     models = list(dict.fromkeys(spec for spec, _ in rows_of_models))  # those a row runs
     volumes_ = [load_bench_volume(spec, preset, placement) for spec in specs]
