@@ -1,11 +1,12 @@
 """8-bit copies of the U-Nets' ONNX graphs, for onnxruntime on the CPU.
 
 onnxruntime's static quantization (QDQ: int8 weights per output channel, uint8 activations, their ranges from
-calibration inputs) runs the U-Nets' convolutions in integer kernels. On the 2-core machine the shipped S 2x and
-S 4x took 0.74-0.80 of their float32 time a call, and inside ``volsr bench`` (512², 2°, the four volumes, side by
-side in one run) their step after the render 1.4-5.8 ms less for 0.02-0.17 dB less PSNR (docs/performance.md,
-"8-bit U-Nets on the CPU"). The clipped history input and every node that reads it stay in float32
-(:func:`history_nodes`): the base the residual is added to keeps its precision. A GPU provider runs the float32
+calibration inputs) runs the U-Nets' convolutions in integer kernels: on the 2-core machine the shipped S 2x took
+0.77 of its float32 time a call with every operator quantized, S 4x 0.80 with its convolutions alone (quantized
+everywhere, its output lay 28.5 dB from the float32 one's), and inside ``volsr bench`` the U-Nets' steps after the
+render were 1.3-20 ms shorter at 512² for 0.002-0.18 dB (docs/performance.md, "8-bit U-Nets on the CPU"). The
+clipped history input and every node that reads it stay in float32 (:func:`history_nodes`): the base the residual
+is added to keeps its precision. A GPU provider runs the float32
 file (or its fp16 conversion, ``OnnxEngine(fp16=True)``).
 
 Needs ``onnx`` and onnxruntime's quantization tools, a shipping step (``training/quantize_model.py``); running the
@@ -16,7 +17,7 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -49,11 +50,12 @@ def history_nodes(graph) -> list[str]:
     return [node.name for node in clips] + [node.name for node in graph.node if set(node.input) & clipped]
 
 
-def quantize_int8(source: str | os.PathLike, target: str | os.PathLike,
-                  feeds: Iterable[dict[str, np.ndarray]]) -> Path:
+def quantize_int8(source: str | os.PathLike, target: str | os.PathLike, feeds: Iterable[dict[str, np.ndarray]],
+                  op_types: Sequence[str] | None = None) -> Path:
     """Write the 8-bit copy of the ONNX model ``source`` to ``target`` (atomically), its activation ranges
     calibrated on ``feeds`` (dicts of the graph's input names to float32 arrays, as the runtime feeds it: the
-    upscaler's calls on rendered frames); the model's metadata (its ``volsr.network`` config) is kept."""
+    upscaler's calls on rendered frames); the model's metadata (its ``volsr.network`` config) is kept. ``op_types``:
+    the operators quantized (None: every one onnxruntime can; ("Conv",): the convolutions alone, the rest float32)."""
     require_extra("onnx", "quantizing a model")
     import onnx
     from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
@@ -72,7 +74,8 @@ def quantize_int8(source: str | os.PathLike, target: str | os.PathLike,
         quant_pre_process(str(source), str(prepared), skip_symbolic_shape=True)
         quantize_static(str(prepared), str(quantized), Feeds(), quant_format=QuantFormat.QDQ, per_channel=True,
                         activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                        nodes_to_exclude=history_nodes(onnx.load(str(prepared)).graph))
+                        nodes_to_exclude=history_nodes(onnx.load(str(prepared)).graph),
+                        **({} if op_types is None else {"op_types_to_quantize": list(op_types)}))
         with atomic_write(target, "wb") as fh:
             fh.write(quantized.read_bytes())
     return target
