@@ -1,13 +1,14 @@
 """What 8-bit quantization would buy the shipped U-Net models on the CPU: ms per network call and the output it changes.
 
     python benchmarks/bench_int8.py [--volume CT_AVM.nii.gz:CT-AAA:0,446] [--size 512] [--frames 12]
-                                    [--variants S,M] [--repeats 7]
+                                    [--variants S,M] [--repeats 7] [--convolutions-only]
 
 For each shipped U-Net model (XS is a filter, not a graph onnxruntime runs) the frames of an orbit
 (2° per frame, the volume filling the view) go through ``Pipeline`` with the float32 model; the
 network inputs of every call are kept. The model is then quantized statically by onnxruntime
 (:func:`~volsr_core.runtime.quantize.quantize_int8`, as ``training/quantize_model.py`` ships them, but
-calibrated on the first half of those inputs), and both graphs run on the second half, 2 threads,
+calibrated on the first half of those inputs; every operator quantized, or with ``--convolutions-only`` the
+convolutions alone), and both graphs run on the second half, 2 threads,
 interleaved: median ms per call of each, their ratio, and the PSNR of the int8 output against the float32 one (how
 much of the picture quantization changes; not against a ground truth). Nothing is shipped from here.
 """
@@ -46,12 +47,14 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=12)
     parser.add_argument("--variants", default="S,M")
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--convolutions-only", action="store_true", help="quantize the convolutions alone")
     args = parser.parse_args()
     spec = args.volume if args.volume.startswith("phantom") or Path(args.volume.split(":")[0]).exists() \
         else str(DATA / args.volume)
     scene = load_bench_volume(spec)
     wanted = args.variants.split(",")
-    print(f"{scene.label}, {args.size}², {args.frames} frames of 2°; int8 calibrated on the first half\n")
+    print(f"{scene.label}, {args.size}², {args.frames} frames of 2°; int8 calibrated on the first half"
+          + (", the convolutions alone" if args.convolutions_only else "") + "\n")
     print("| model | float32 ms | int8 ms | int8 / float32 | PSNR int8 vs float32 dB |")
     print("|---|---:|---:|---:|---:|")
     for entry in shipped_models():
@@ -65,7 +68,8 @@ def main() -> None:
             pipeline.render(camera)
         half = len(recorder.feeds) // 2
         with tempfile.TemporaryDirectory() as folder:
-            quantized = quantize_int8(path, Path(folder) / "int8.onnx", recorder.feeds[:half])
+            quantized = quantize_int8(path, Path(folder) / "int8.onnx", recorder.feeds[:half],
+                                      ("Conv",) if args.convolutions_only else None)
             sessions = {"float32": session(path), "int8": session(quantized)}
             times: dict[str, list[float]] = {name: [] for name in sessions}
             scores = []

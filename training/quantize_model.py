@@ -33,7 +33,7 @@ FIDELITY_DB = 40.0
 under this too), and with the convolutions alone S 4x 45.8, M 4x 43.4, S 8x 49.1."""
 OP_TYPES = (None, ("Conv",))
 """What is quantized, tried in turn until the copy keeps :data:`FIDELITY_DB`: every operator onnxruntime can (the
-fastest: S 2x 0.77 of its float32 time a call, with the convolutions alone 0.93), else the convolutions alone."""
+fewest float32 operators between the integer kernels), else the convolutions alone."""
 SECTION = "## 8-bit file for the CPU"
 
 

@@ -76,7 +76,8 @@ def model_file(variant: str = "XS", scale: int = DEFAULT_SCALE, kind: str = "onn
 def model_file_to_run(variant: str = "XS", scale: int = DEFAULT_SCALE, device: str = "cpu") -> Path:
     """The ONNX file to run for the shipped model of ``variant`` at ``scale`` on ``device`` (SHA-256 checked): on the
     CPU its 8-bit copy where one ships (:mod:`~volsr_core.runtime.quantize`: every U-Net, whose step after the render
-    it shortens by 1.3-20 ms at 512² for at most 0.18 dB; docs/performance.md, "8-bit U-Nets on the CPU"), else (XS, a
+    it shortens by 1.3-20 ms at 512² for 0.002-0.18 dB, S 2x's up to 0.50 at 1024²; docs/performance.md, "8-bit
+    U-Nets on the CPU"), else (XS, a
     numba kernel on the float32 file's weights), and on a GPU, the float32 file. A caller that wants float32 on the
     CPU takes :func:`model_file`."""
     kind = INT8_KIND if device == "cpu" and INT8_KIND in find_model(variant, scale)["files"] else "onnx"

@@ -1,10 +1,10 @@
 """8-bit copies of the U-Nets' ONNX graphs, for onnxruntime on the CPU.
 
 onnxruntime's static quantization (QDQ: int8 weights per output channel, uint8 activations, their ranges from
-calibration inputs) runs the U-Nets' convolutions in integer kernels: on the 2-core machine the shipped S 2x took
-0.77 of its float32 time a call with every operator quantized, S 4x 0.80 with its convolutions alone (quantized
-everywhere, its output lay 28.5 dB from the float32 one's), and inside ``volsr bench`` the U-Nets' steps after the
-render were 1.3-20 ms shorter at 512² for 0.002-0.18 dB (docs/performance.md, "8-bit U-Nets on the CPU"). The
+calibration inputs) runs the U-Nets' convolutions in integer kernels: inside ``volsr bench`` on the 2-core machine,
+side by side with the float32 files at 512², 2°, the shipped U-Nets' steps after the render were 1.3-20 ms shorter
+for 0.002-0.18 dB of PSNR (at 1024² S 2x's, every operator quantized, lost up to 0.50 dB; docs/performance.md,
+"8-bit U-Nets on the CPU"). The
 clipped history input and every node that reads it stay in float32 (:func:`history_nodes`): the base the residual
 is added to keeps its precision. A GPU provider runs the float32
 file (or its fp16 conversion, ``OnnxEngine(fp16=True)``).
