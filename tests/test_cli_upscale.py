@@ -175,7 +175,7 @@ def test_without_scale_variant_or_model_it_runs_volsr_xs_2x(tmp_path, capsys):
     assert "8x (4x + bicubic 2x) with volsr-XS-4x.onnx" in capsys.readouterr().out  # the 8x U-Net only when named
     assert main(["upscale", "--orbit", "1", "--size", "32", "--scale", "8", "--variant", "S",
                  "--out", str(tmp_path / "b")]) == 0
-    assert "8x with volsr-S-8x.onnx" in capsys.readouterr().out
+    assert "8x with volsr-S-8x.int8.onnx" in capsys.readouterr().out  # a U-Net on the CPU: its 8-bit file
     assert main(["upscale", "--orbit", "2", "--size", "32", "--scale", "4", "--out", str(tmp_path / "c")]) == 0
     assert "4x with volsr-XS-4x.onnx" in (out := capsys.readouterr().out) and "from 8x8 in 2 depth slabs" in out
     assert main(["upscale", "--orbit", "2", "--size", "32", "--scale", "4", "--slabs", "0",
@@ -246,7 +246,8 @@ def test_variant_auto_where_no_model_ships_takes_a_stretched_one(tmp_path, monke
     assert code == 0
     out = capsys.readouterr().out
     budget = models.PAYING_NETWORK_SHARE * measured.pop("lr render")
-    shipped = {(e["variant"], e["scale"]): e["files"]["onnx"] for e in models.shipped_models()}
+    shipped = {(e["variant"], e["scale"]): models.model_file_to_run(e["variant"], e["scale"]).name
+               for e in models.shipped_models()}
     order = [shipped[v, m] for m in (8, 4, 2) for v in ("L", "M", "S", "XS") if (v, m) in shipped]
     timed = list(measured)
     assert timed == order[:len(timed)], "timed in the rule's order"

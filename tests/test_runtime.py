@@ -370,7 +370,7 @@ def test_stretch_auto_picks_by_the_views_pixels_per_voxel_at_each_new_history():
     assert Pipeline(volume, tf, scale=8, stretch="auto", variant="S", size=(64, 64)).auto_stretch
     # at 16x, where no model ships, the largest scale below at which the variant ships, stretched
     for variant, stretch, name in ((None, 4, "volsr-XS-4x.onnx"), ("XS", 4, "volsr-XS-4x.onnx"),
-                                   ("S", 2, "volsr-S-8x.onnx")):
+                                   ("S", 2, "volsr-S-8x.int8.onnx")):
         sixteen = Pipeline(volume, tf, scale=16, stretch="auto", variant=variant, size=(64, 64))
         assert (sixteen.auto_stretch, sixteen.stretch, sixteen.engine.path.name) == (False, stretch, name)
         assert sixteen.render(wide).shape == (64, 64, 3) and sixteen.low_resolution_size == (4, 4)

@@ -1,4 +1,4 @@
-"""Ship a shipped U-Net's 8-bit ONNX file for the CPU: quantized, registered, and described in its model card.
+"""Give a shipped U-Net an 8-bit ONNX file for the CPU: quantized, registered, and described in its model card.
 
     python training/quantize_model.py volsr-S-2x [--eval docs/eval/motion-2x-S-int8/eval.json] [--card-only]
 
