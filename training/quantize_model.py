@@ -7,7 +7,8 @@ upscaler gives the model on two orbits of the validation volume (the engine in t
 data's validation split has it; no benchmark volume): 8 frames of 2° at 512² and 8 of 5° at 1024², the first two of
 each left out (no history yet). Refuses a copy whose output lies less than :data:`FIDELITY_DB` from the float32
 file's on those inputs. Writes ``resources/models/NAME.int8.onnx`` (atomically), adds it to ``models.json``
-(``files``/``sha256`` ``onnx_int8``, which ``model_file_to_run`` hands the CPU) and writes the card's section
+(``files``/``sha256`` ``onnx_int8``, which ``model_file_to_run`` hands the CPU, with ``int8_op_types`` and
+``int8_fidelity_db``) and writes the card's section
 "8-bit file for the CPU": its fidelity and, with ``--eval`` (``volsr eval resources/models/NAME.int8.onnx --data
 out/dataset_motion --split test``), its held-out numbers. ``--card-only`` writes that section for the file already
 registered, without quantizing again (for the ``--eval`` of the file just made). ``ship_model.py`` replaces the
@@ -65,8 +66,9 @@ def fidelity_db(float_path: Path, int8_path: Path, feeds: list[dict[str, np.ndar
     return float(10.0 * np.log10(1.0 / max(float(np.mean(errors)), 1e-12)))
 
 
-def card_section(entry: dict, fidelity: float | None, eval_paths: list[Path]) -> list[str]:
-    """The card's section on the 8-bit file of ``entry`` (its registry entry)."""
+def card_section(entry: dict, eval_paths: list[Path]) -> list[str]:
+    """The card's section on the 8-bit file of ``entry`` (its registry entry, which holds what was quantized and the
+    fidelity measured)."""
     path = MODELS / entry["files"]["onnx_int8"]
     lines = [SECTION, "", f"`{path.name}` ({path.stat().st_size / 2**20:.2f} MiB; SHA-256 in `models.json`) is what "
              "hosts, `volsr upscale` and `volsr bench` run on the CPU (`model_file_to_run`); a GPU runs "
@@ -77,10 +79,8 @@ def card_section(entry: dict, fidelity: float | None, eval_paths: list[Path]) ->
              + " quantized, the clipped history input and what reads it float32), calibrated on "
              f"{len(ORBITS) * (FRAMES - SKIPPED)} of the upscaler's calls on orbits of the validation volume "
              f"(`{CALIBRATION.name}`, {CALIBRATION_LOOK}; " + ", ".join(f"{s}² at {d:g}°/frame" for s, d in ORBITS)
-             + "): `python training/quantize_model.py " + entry["name"] + "`."]
-    if fidelity is not None:
-        lines += ["", f"Its output lies {fidelity:.1f} dB (PSNR) from the float32 file's on those calls."]
-    lines.append("")
+             + "): `python training/quantize_model.py " + entry["name"] + "`.", "",
+             f"Its output lies {entry['int8_fidelity_db']:.1f} dB (PSNR) from the float32 file's on those calls.", ""]
     for eval_path in eval_paths:
         lines += metrics_table(eval_path)
     return lines
@@ -103,7 +103,6 @@ def main() -> None:
     if entry is None or entry["variant"] == "XS":
         raise SystemExit(f"{registry_path}: {args.name} is no shipped U-Net (XS runs in its own kernel)")
     float_path, int8_path = MODELS / entry["files"]["onnx"], MODELS / f"{args.name}.int8.onnx"
-    fidelity = None
     if args.card_only:
         if file_sha256(int8_path) != entry["sha256"].get(INT8_KIND):
             raise SystemExit(f"{int8_path}: not the 8-bit file models.json registers; run without --card-only")
@@ -119,19 +118,15 @@ def main() -> None:
         else:
             int8_path.unlink()
             raise SystemExit(f"{int8_path}: output under {FIDELITY_DB:g} dB from the float32 file's, however quantized")
-        entry["int8_op_types"] = list(op_types or ["all"])
+        entry["int8_op_types"], entry["int8_fidelity_db"] = list(op_types or ["all"]), round(fidelity, 1)
         entry["files"][INT8_KIND], entry["sha256"][INT8_KIND] = int8_path.name, file_sha256(int8_path)
         with atomic_write(registry_path, "w") as fh:
             json.dump(registry, fh, indent=1)
             fh.write("\n")
         print(f"{int8_path.relative_to(REPO)}: {fidelity:.1f} dB from the float32 file's output, registered")
     card_path = MODELS / entry["files"]["card"]
-    card = card_path.read_text()
-    if args.card_only:  # keep the fidelity line the quantizing run wrote
-        kept = [line for line in card.splitlines() if line.startswith("Its output lies ")]
-        fidelity = float(kept[0].split()[3]) if kept else None
     with atomic_write(card_path, "w") as fh:
-        fh.write(replace_section(card, card_section(entry, fidelity, args.eval), SECTION))
+        fh.write(replace_section(card_path.read_text(), card_section(entry, args.eval), SECTION))
     print(f"{card_path.relative_to(REPO)}: section {SECTION[3:]!r}")
 
 
