@@ -48,6 +48,23 @@ def test_clip_with_window_writes_the_planes_over_their_window_and_clips_the_rest
         clip_with_window(image, planes, top=20, left=16)  # rows 20..31 of 30
 
 
+def test_clip_with_window_takes_the_planes_only_in_the_blocks_where_says():
+    """Per 4 x 4 block of the window (an LR pixel of a 4x network) ``where`` says whether the planes or the image's
+    own pixels go there; both clipped to [0, 1]; a ``where`` of another shape is refused."""
+    rng = np.random.default_rng(5)
+    image = rng.normal(0.5, 0.6, size=(30, 44, 3)).astype(np.float32)
+    planes = rng.normal(0.5, 0.6, size=(3, 12, 20)).astype(np.float32)
+    where = rng.random((3, 5)) > 0.5
+    expected = image.copy()
+    window = expected[8:20, 12:32]
+    taken = np.repeat(np.repeat(where, 4, 0), 4, 1)
+    window[taken] = planes.transpose(1, 2, 0)[taken]
+    out = clip_with_window(image, planes, top=8, left=12, where=where, scale=4)
+    assert np.array_equal(out, np.clip(expected, 0.0, 1.0)) and 0 < where.sum() < where.size
+    with pytest.raises(ValueError, match=r"one flag per 4x4 block"):
+        clip_with_window(image, planes, top=8, left=12, where=where[:2], scale=4)
+
+
 def test_the_history_feeds_parts_join_to_the_history_it_gives():
     """HistoryFeed.parts (what the upscaler lays out channels first) holds the channels of HistoryFeed's history."""
     from volsr_core.sr.history import HistoryFeed

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from volsr_core.runtime.content_window import WINDOW_ALIGN, WINDOW_MARGIN, content_window
+from volsr_core.runtime.content_window import NEARBY, WINDOW_ALIGN, WINDOW_MARGIN, content_window, shows_nearby
 
 
 def test_the_window_holds_what_the_frame_or_the_base_shows_widened_and_aligned():
@@ -28,6 +28,19 @@ def test_the_window_holds_what_the_frame_or_the_base_shows_widened_and_aligned()
     assert content_window(alpha, base, background, 2, margin=0, align=1) == (63, 64, 71, 72)
     base[:, 0, 0] = 1.0  # not read: a base given as None is the background beyond one LR pixel of the alpha
     assert content_window(alpha, None, background, 2, margin=0, align=1) == (62, 64, 70, 72)
+
+
+def test_shows_nearby_marks_the_window_pixels_within_reach_of_what_shows():
+    """Alpha shows at LR (10, 10) and (3, 30) alone: in the window rows 5-19, columns 5-34 the pixels within two
+    (Chebyshev distance) of either are marked, those of a pixel outside the window included, and no other."""
+    alpha = np.zeros((24, 40), np.float32)
+    alpha[10, 10] = 0.3
+    alpha[3, 30] = 1e-6
+    marked = shows_nearby(alpha, (5, 20, 5, 35))
+    rows, columns = np.mgrid[5:20, 5:35]
+    near = lambda y, x: np.maximum(abs(rows - y), abs(columns - x)) <= NEARBY  # noqa: E731
+    assert marked.shape == (15, 30) and np.array_equal(marked, near(10, 10) | near(3, 30))
+    assert NEARBY == 2 and marked.sum() == 25 + 5 and not shows_nearby(alpha * 0, (5, 20, 5, 35)).any()
 
 
 class CountingEngine:
@@ -85,10 +98,43 @@ def test_the_shipped_u_net_on_the_volumes_window_gives_the_whole_frames_image_wh
     np.testing.assert_array_equal(image, np.broadcast_to(background, image.shape))
 
 
+def test_the_shipped_u_net_leaves_a_light_background_as_it_is_where_nothing_shows_nearby(model):
+    """The shipped S 4x on the phantom over a light background (3D Slicer's, about): where the LR frame shows nothing
+    within :data:`NEARBY` LR pixels its images are the background exactly, inside the window too, where the network
+    alone, run there, tints it by more than 0.01; where the volume shows they are the network's own."""
+    pytest.importorskip("onnxruntime")
+    from volsr_core.io import make_phantom
+    from volsr_core.runtime.engines import OnnxEngine
+    from volsr_core.runtime.pipeline import Pipeline
+    from volsr_core.scene import Volume, get_preset
+    from volsr_core.scene.camera import Camera
+    from volsr_core.scene.camera_paths import orbit
+
+    background = np.float32([0.76, 0.76, 0.87])
+    volume = Volume.from_record(make_phantom(shape=(48, 48, 48)))
+    pipeline = Pipeline(volume, get_preset("CT-Phantom"), model, scale=4, size=(256, 256), threads=2,
+                        background=tuple(background))
+    engine = pipeline.upscaler.engine = CountingEngine(OnnxEngine(model, providers=["CPUExecutionProvider"]))
+    start = Camera.framing(volume.bounds).dolly(0.45).reset_clipping_range(volume.bounds)
+    tints = []
+    for camera in orbit(start, 4, degrees=4.0):
+        image = pipeline.render(camera)
+        top, bottom, left, right = pipeline.upscaler.last_window
+        window = image[4 * top:4 * bottom, 4 * left:4 * right]
+        network = np.clip(engine.output[0].transpose(1, 2, 0), 0.0, 1.0)
+        near = np.repeat(np.repeat(shows_nearby(pipeline.last_low_resolution.alpha, (top, bottom, left, right)), 4, 0),
+                         4, 1)
+        assert 0.05 < near.mean() < 0.95
+        np.testing.assert_array_equal(window[~near], np.broadcast_to(background, window[~near].shape))
+        np.testing.assert_array_equal(window[near], network[near])
+        tints.append(float(np.abs(network[~near] - background).max()))
+    assert max(tints) > 0.01
+
+
 def test_the_window_network_inputs_are_the_whole_frames_cut_to_it(model):
     """On each frame of an orbit the shipped S 4x is given the window of what it took on the whole frame: the frame's
     features stacked (``network_inputs``), its motion vectors (zeros on the first frame) and jitter, and the TAAU
-    estimate's pixels; where the window lies the image is the network's output clipped to [0, 1]."""
+    estimate's pixels; where the frame shows something near the image is the network's output clipped to [0, 1]."""
     pytest.importorskip("onnxruntime")
     from volsr_core.io import make_phantom
     from volsr_core.runtime.engines import OnnxEngine
@@ -115,4 +161,5 @@ def test_the_window_network_inputs_are_the_whole_frames_cut_to_it(model):
         np.testing.assert_array_equal(jitter, np.float32(frame.jitter)[None, None])
         assert history.shape == (1, 3, 4 * (bottom - top), 4 * (right - left))
         window = image[4 * top:4 * bottom, 4 * left:4 * right]
-        np.testing.assert_array_equal(window, np.clip(engine.output[0].transpose(1, 2, 0), 0.0, 1.0))
+        near = np.repeat(np.repeat(shows_nearby(frame.alpha, (top, bottom, left, right)), 4, 0), 4, 1)
+        np.testing.assert_array_equal(window[near], np.clip(engine.output[0].transpose(1, 2, 0), 0.0, 1.0)[near])

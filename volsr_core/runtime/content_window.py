@@ -24,6 +24,13 @@ phantom (``tests/test_upscaler_window.py``)."""
 WINDOW_ALIGN = 4
 """The window's corners lie on multiples of this many LR pixels (or on the frame's edge), so that the U-Nets' two
 max-pools tile it as they tile the whole frame."""
+NEARBY = 2
+"""LR pixels from where the frame's alpha shows something within which the upscaler takes a U-Net's output inside
+the window (:func:`shows_nearby`), the TAAU estimate beyond. On the bench's four volumes at 512², 2° (S 2x and S 4x),
+the images so made lie within 0.010 of the network's own everywhere, nearer the ground truth where they differ (a
+mean error of 0.0000-0.0002 there against 0.0021-0.0041) and 0.000-0.003 dB above them in PSNR; at 1 LR pixel they
+lay up to 0.25 from them, taking away what the network fills in beside thin structures that the current frame's
+rays miss (0.006 dB lower on CT_AVM)."""
 _BLOCK = 64  # HR pixels :func:`_row_extents` tests at once
 
 
@@ -97,3 +104,28 @@ def content_window(alpha: np.ndarray, base: np.ndarray | None, background, scale
     left, right = int(shown[:, 0].min()) - margin, int(shown[:, 1].max()) + 1 + margin
     return (max(top // align * align, 0), min(-(-bottom // align) * align, h),
             max(left // align * align, 0), min(-(-right // align) * align, w))
+
+
+def shows_nearby(alpha: np.ndarray, window: tuple[int, int, int, int], reach: int = NEARBY) -> np.ndarray:
+    """Per LR pixel of ``window`` (top, bottom, left, right; bottom and right exclusive) of ``alpha`` (h, w: the LR
+    frame's accumulated opacity), bool: whether ``alpha`` is above 0 within ``reach`` LR pixels of it (its 5x5
+    neighbourhood at 2), pixels outside the window counted too. Where it is False a TAAU-based network's base is
+    what TAAU makes of an empty neighbourhood, the background, and what the network adds there is the residual of a
+    background it was never trained on (the shipped S 4x's: up to 0.058 on a light one, 0.010 on black): the
+    upscaler keeps the base. Shifted ORs of bytes, a column pass and a row pass: 0.5 ms on a 512² window of a frame's
+    alpha (a strided view; 0.2 ms on a contiguous one), where numba loops took 0.9-1.3 ms."""
+    top, bottom, left, right = window
+    h, w = alpha.shape
+    rows, columns = max(bottom - top, 0), max(right - left, 0)
+    padded = np.zeros((rows + 2 * reach, columns + 2 * reach), np.bool_)  # the window and reach around it
+    y0, y1, x0, x1 = max(top - reach, 0), min(bottom + reach, h), max(left - reach, 0), min(right + reach, w)
+    if y1 > y0 and x1 > x0:
+        np.greater(alpha[y0:y1, x0:x1], 0.0, out=padded[y0 - top + reach:y1 - top + reach,
+                                                        x0 - left + reach:x1 - left + reach])
+    near = padded[:rows].copy()
+    for dy in range(1, 2 * reach + 1):
+        near |= padded[dy:dy + rows]
+    out = near[:, :columns].copy()
+    for dx in range(1, 2 * reach + 1):
+        out |= near[:, dx:dx + columns]
+    return out

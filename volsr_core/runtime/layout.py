@@ -64,14 +64,16 @@ def to_image_clipped(planes: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(parallel=True, fastmath=True, error_model="numpy", boundscheck=False, cache=True)
-def _clip_with_window(image: np.ndarray, planes: np.ndarray, top: int, left: int) -> None:
+def _clip_with_window(image: np.ndarray, planes: np.ndarray, top: int, left: int, where: np.ndarray,
+                      scale: int) -> None:
     height, width, channels = image.shape
     rows, columns = planes.shape[1], planes.shape[2]
     low, high = np.float32(0.0), np.float32(1.0)
     for y in numba.prange(height):
         inside = top <= y < top + rows
+        taken = where[(y - top) // scale] if inside else where[0]
         for x in range(width):
-            if inside and left <= x < left + columns:
+            if inside and left <= x < left + columns and taken[(x - left) // scale]:
                 for c in range(channels):
                     image[y, x, c] = min(max(planes[c, y - top, x - left], low), high)
             else:
@@ -79,13 +81,24 @@ def _clip_with_window(image: np.ndarray, planes: np.ndarray, top: int, left: int
                     image[y, x, c] = min(max(image[y, x, c], low), high)
 
 
-def clip_with_window(image: np.ndarray, planes: np.ndarray, top: int = 0, left: int = 0) -> np.ndarray:
+def clip_with_window(image: np.ndarray, planes: np.ndarray, top: int = 0, left: int = 0,
+                     where: np.ndarray | None = None, scale: int = 1) -> np.ndarray:
     """``image`` (H, W, C) float32, in place and returned: ``planes`` (C, h, w) over its window of rows ``top`` ..
     ``top`` + h - 1 and columns ``left`` .. ``left`` + w - 1, the rest its own, all clipped to [0, 1]; one parallel
-    pass (what a network's output on a window of the image it refines becomes before anyone sees it)."""
+    pass (what a network's output on a window of the image it refines becomes before anyone sees it). ``where``
+    (h / ``scale``, w / ``scale``, bool: per block of ``scale`` x ``scale`` pixels of the window, an LR pixel of a
+    network that upscales by ``scale``) takes the planes only in its True blocks, the image's own pixels elsewhere;
+    None takes them everywhere in the window."""
     height, width, channels = image.shape
     if planes.shape[0] != channels or not (0 <= top <= top + planes.shape[1] <= height
                                            and 0 <= left <= left + planes.shape[2] <= width):
         raise ValueError(f"planes {planes.shape} at ({top}, {left}) do not lie in an image of shape {image.shape}")
-    _clip_with_window(image, np.asarray(planes, dtype=np.float32), int(top), int(left))
+    blocks = (-(-planes.shape[1] // scale), -(-planes.shape[2] // scale))
+    if where is None:
+        where = np.ones(blocks, np.bool_)
+    elif where.shape != blocks:
+        raise ValueError(f"where must hold one flag per {scale}x{scale} block of the planes {planes.shape}: "
+                         f"shape {blocks}, got {where.shape}")
+    _clip_with_window(image, np.asarray(planes, dtype=np.float32), int(top), int(left),
+                      np.ascontiguousarray(where, dtype=np.bool_).reshape(max(blocks[0], 1), -1), int(scale))
     return image
