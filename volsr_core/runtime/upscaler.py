@@ -147,10 +147,11 @@ class StatefulUpscaler:
     ``skip_background`` (the default) runs a TAAU-based network without previous frames on the window of the frame
     where the volume or its TAAU estimate shows (:func:`~volsr_core.runtime.content_window.content_window`, a
     margin around it) and takes the estimate, the background, outside it; the whole frame when the window holds
-    most of it (more than :data:`WINDOW_SHARE` of its pixels), none where nothing shows. Inside the window too the
-    estimate stays where the frame shows nothing within :data:`~volsr_core.runtime.content_window.NEARBY` LR pixels
-    (:func:`~volsr_core.runtime.content_window.shows_nearby`): there the network's output is the residual of a
-    background it was never trained on, a tint up to 0.058 on a light one. False runs it on every pixel and takes
+    most of it (more than :data:`WINDOW_SHARE` of its pixels), none where nothing shows. For a U-Net the estimate
+    stays inside the window too where the frame shows nothing within
+    :data:`~volsr_core.runtime.content_window.NEARBY` LR pixels
+    (:func:`~volsr_core.runtime.content_window.shows_nearby`): there its output is the residual of a background it
+    was never trained on, a tint up to 0.058 on a light one. False runs the network on every pixel and takes
     its output everywhere, as it did before 2026-11-29. :attr:`last_window` holds the last frame's window in LR
     pixels (top, bottom, left, right; bottom and right exclusive).
     """
@@ -283,10 +284,10 @@ class StatefulUpscaler:
     def _refined(self, frame: FeatureFrame, background: Sequence[float]) -> np.ndarray:
         """:meth:`upscale` for a TAAU-based network without previous frames (:attr:`skip_background`): TAAU's
         estimate, the network run on the frame's content window alone (see the class; the whole frame where the
-        window holds more than :data:`WINDOW_SHARE` of it) and its output written over the estimate there where the
-        frame shows something within :data:`~volsr_core.runtime.content_window.NEARBY` LR pixels, clipped to [0, 1]
-        with it in one pass. The network's inputs, history and output are the window's alone, laid out channels first
-        from views of the frame's buffers and the estimate into buffers kept between frames."""
+        window holds more than :data:`WINDOW_SHARE` of it) and its output written over the estimate there (a U-Net's
+        only where the frame shows something within :data:`~volsr_core.runtime.content_window.NEARBY` LR pixels),
+        clipped to [0, 1] with it in one pass. The network's inputs, history and output are the window's alone, laid
+        out channels first from views of the frame's buffers and the estimate into buffers kept between frames."""
         colour, scale = frame.color, self.config.scale
         motion = frame.motion if self._continues(frame, colour) else _no_motion(frame.motion.shape)
         jitter = np.asarray(frame.jitter, dtype=np.float32)
@@ -316,8 +317,10 @@ class StatefulUpscaler:
         history = to_channels_first([part[hr_rows, hr_columns] for part in parts], self._window_buffer(
             "history", (hr_channels,) + hr_window, hr_channels * h * w * scale * scale))
         out = self.engine(lr[None, None], vectors[None, None], jitter[None, None], history[None])[0]
-        image = clip_with_window(estimate, out, top * scale, left * scale,
-                                 where=shows_nearby(frame.alpha, (top, bottom, left, right)), scale=scale)
+        # a U-Net's residual where nothing shows nearby is a tint; a base filter alone (XS through its graph) keeps its
+        # output there, as its kernel does
+        where = shows_nearby(frame.alpha, (top, bottom, left, right)) if self.config.widths else None
+        image = clip_with_window(estimate, out, top * scale, left * scale, where=where, scale=scale)
         self.history.keep(image)
         return self._stretched(image)
 
