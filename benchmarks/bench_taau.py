@@ -8,9 +8,10 @@ jitter, motion vectors to the previous camera, the reprojected point's depth, th
 frame's pixels per voxel; ray starts jittered), then fed ``--passes`` times through
 ``TemporalUpsampler`` (history reset before each pass). With ``--against COMMIT`` the
 ``volsr_core/temporal/taau.py`` of that commit (``git show``) runs too, interleaved call by call with
-the current one so that machine noise hits both alike; the table gives the median ms per call of
-each (the calls after the first two frames of a pass, which have a history), their ratio and the
-largest difference between their outputs. ``--slabs K`` times the layered TAAU instead
+the current one (which goes first alternating from frame to frame) so that machine noise hits both alike;
+the table gives the median ms per call of each (the calls after the first two frames of a pass, which have a
+history), their ratio and the largest difference between their outputs. TAAU runs without its side outputs, as
+``volsr bench``'s TAAU and variant XS run it (``--side-outputs``: with them, as before 2026-12-02). ``--slabs K`` times the layered TAAU instead
 (``LayeredUpsampler``, ``volsr_core/temporal/layered.py``) on frames rendered in K depth slabs, as XS 4x runs.
 ``--volume`` is a ``volsr bench`` volume spec (``../shared/data/volumes`` is searched for a bare file name) or
 ``phantom``.
@@ -74,20 +75,24 @@ def lr_frames(caster: RayCaster, cameras: list, size: int, scale: int, slabs: in
     return frames
 
 
-def time_side_by_side(modules: list[ModuleType], frames: list[tuple], scale: int, passes: int, slabs: int = 0):
-    """Median ms per call of each module's ``TemporalUpsampler`` (with ``slabs``: ``LayeredUpsampler``; interleaved),
-    and the largest output difference."""
-    upsamplers = [m.LayeredUpsampler(scale) if slabs else m.TemporalUpsampler(scale) for m in modules]
+def time_side_by_side(modules: list[ModuleType], frames: list[tuple], scale: int, passes: int, slabs: int = 0,
+                      side_outputs: bool = False):
+    """Median ms per call of each module's ``TemporalUpsampler`` (``side_outputs`` as given; with ``slabs``:
+    ``LayeredUpsampler``), interleaved call by call, the order rotating from frame to frame, and the largest output
+    difference."""
+    upsamplers = [m.LayeredUpsampler(scale) if slabs else m.TemporalUpsampler(scale, side_outputs=side_outputs)
+                  for m in modules]
     times: list[list[float]] = [[] for _ in modules]
     difference = 0.0
     for _ in range(passes):
         for upsampler in upsamplers:
             upsampler.reset()
         for t, args in enumerate(frames):
-            outputs = []
-            for k, upsampler in enumerate(upsamplers):
+            outputs = [None] * len(upsamplers)
+            for i in range(len(upsamplers)):
+                k = (t + i) % len(upsamplers)
                 started = time.perf_counter()
-                outputs.append(upsampler(*args))
+                outputs[k] = upsamplers[k](*args)
                 if t >= HISTORY_FRAMES:
                     times[k].append(1000.0 * (time.perf_counter() - started))
             difference = max([difference] + [float(np.abs(o - outputs[0]).max()) for o in outputs[1:]])
@@ -155,17 +160,19 @@ def main() -> None:
     parser = orbit_parser(__doc__.split("\n\n")[0])
     parser.add_argument("--passes", type=int, default=3)
     parser.add_argument("--slabs", type=int, default=0, help="time the layered TAAU on K depth slabs (0: TAAU)")
+    parser.add_argument("--side-outputs", action="store_true", help="TAAU with its side outputs (last_aux)")
     args = parser.parse_args()
     scene, caster, cameras = orbit_scene(args)
     kernel, module = (LAYERED_KERNEL, layered) if args.slabs else (KERNEL, current)
     with tempfile.TemporaryDirectory() as folder:
         modules = [module] + ([module_at(args.against, Path(folder), kernel)] if args.against else [])
-        print(f"{scene.label}, {args.frames} frames of {args.degrees:g}°, {args.passes} passes\n")
+        outputs = "" if args.slabs else f", {'with' if args.side_outputs else 'without'} side outputs"
+        print(f"{scene.label}, {args.frames} frames of {args.degrees:g}°, {args.passes} passes{outputs}\n")
         print(table_header(f"| output | scale | {'layered TAAU' if args.slabs else 'TAAU'} ms", args.against))
         for size in (int(s) for s in args.sizes.split(",")):
             for scale in (int(s) for s in args.scales.split(",")):
                 frames = lr_frames(caster, cameras, size, scale, args.slabs)
-                ms, difference = time_side_by_side(modules, frames, scale, args.passes, args.slabs)
+                ms, difference = time_side_by_side(modules, frames, scale, args.passes, args.slabs, args.side_outputs)
                 print(table_row(f"| {size}² | {scale}x", ms, difference), flush=True)
 
 

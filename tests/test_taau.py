@@ -334,6 +334,56 @@ def test_a_pixel_whose_lr_box_is_one_colour_is_that_colour_whatever_its_history(
     assert flat > hr * hr // 4
 
 
+@pytest.mark.parametrize("scale, rotation, settles", [(2, 2.0, True), (2, 0.5, False), (4, 2.0, False), (4, 5.0, True)])
+def test_a_flat_pixel_whose_splat_weight_reaches_the_cap_is_made_without_its_history_as_with_it(scale, rotation,
+                                                                                                 settles):
+    """Where every pixel's splat weight exceeds the history cap (a rotating view at 2x, and at 4x by 5 degrees a frame)
+    a flat pixel's new weight is the cap whatever its history holds, and the kernel skips the fetch there (and the
+    prepass the motion spread); with the side outputs, which report the history's weight, it fetches it. Both give the
+    same image and history, bit for bit, frame after frame, where histories of low weight lie under the flat
+    regions (a frame rendered without history first, its pixels then one colour) and where none settles (2x at half
+    a degree, 4x at 2 degrees: the cap above the least weight)."""
+    from volsr_core.temporal.taau import SETTLING_MARGIN, least_weight
+
+    n = 12
+    rng = np.random.default_rng(3)
+    settling, fetching = TemporalUpsampler(scale, side_outputs=False), TemporalUpsampler(scale)
+    settled = 0
+    for t in range(6):
+        lr = rng.random((n, n, 3), dtype=np.float32)
+        lr[:, : 3 + t] = 0.0  # a black region that grows over what was content: low-weight histories under it
+        lr[8:, 8:] = (0.2, 0.5, 0.7)
+        motion = rng.uniform(-1.0, 1.0, (n, n, 2)).astype(np.float32)
+        depth = rng.random((n, n)).astype(np.float32)
+        jitter = halton_jitter(t, jitter_phases(scale))
+        images = [up(lr, motion, jitter, depth, rotation=rotation) for up in (settling, fetching)]
+        np.testing.assert_array_equal(images[0], images[1])
+        np.testing.assert_array_equal(settling.history, fetching.history)
+        _, _, sigma, cap, _ = settling._frame_settings(lambda: True, t > 0, rotation, None)
+        columns = settling._columns(n, float(jitter[0]), sigma)[0]
+        rows = settling._columns(n, float(jitter[1]), sigma)[0]
+        settled += least_weight(columns) * least_weight(rows) > cap * SETTLING_MARGIN
+    assert settled == (6 if settles else 0), "each case settles every frame (the caps 0.5 and 0.47) or none (1.14, 1)"
+
+
+@pytest.mark.parametrize("rotation", [0.5, 2.0])
+def test_a_flat_pixel_drops_a_history_in_front_of_it_where_the_neighbourhood_shows_parallax(rotation):
+    """A frame all one colour (flat everywhere), its depth behind a history nearer by more than the disocclusion
+    threshold and its motion vectors spread (parallax): the history is dropped everywhere, so the new weights are
+    those of the frame fed without a history; at 2x by half a degree (no pixel settles: the weight is the splat's)
+    and by 2 degrees (every pixel settles: the cap)."""
+    n, scale = 10, 2
+    rng = np.random.default_rng(4)
+    up, fresh = TemporalUpsampler(scale, side_outputs=False), TemporalUpsampler(scale, side_outputs=False)
+    up(rng.random((n, n, 3), dtype=np.float32), np.zeros((n, n, 2), np.float32), (0.0, 0.0),
+       np.full((n, n), 0.1, np.float32), rotation=rotation)
+    frame = (np.zeros((n, n, 3), np.float32), rng.uniform(-1.0, 1.0, (n, n, 2)).astype(np.float32), (0.25, -0.25),
+             np.full((n, n), 0.9, np.float32))
+    up(*frame, rotation=rotation)
+    fresh(*frame, rotation=rotation)
+    np.testing.assert_array_equal(up.history[..., 3], fresh.history[..., 3])
+
+
 # -- fine sampling: the bilinear blend and the shorter history -------------------------------------
 def test_smoothing_ramps_with_the_output_pixels_per_voxel():
     up = TemporalUpsampler(2)  # smooth between 1.75 and 2.75 output px per voxel

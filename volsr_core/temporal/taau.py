@@ -30,6 +30,11 @@ orbit per frame (at 1024² and 5° by 0.00-0.27 dB), and converges on a still ca
    the blend (the same values; the fetch skipped: 0.78-0.83 of the kernel's time at 512² and 1024²; the
    splat and the blend too: 0.73-0.87 of that; such a run in a loop of its own, without the history rows' Catmull-Rom
    weights: 0.91-0.94 of that, docs/temporal.md, "Speed").
+   Where every pixel's splat confidence ``a`` exceeds the history cap of step 6 (a rotating view at 2x, at 4x by 5°
+   a frame or sampled finely: :func:`least_weight`) such a pixel's new weight ``min(n + a, cap)`` is the cap
+   whatever its history holds, so not even the history's weight is fetched there, nor the motion spread of step 4
+   found (without :attr:`~TemporalUpsampler.side_outputs`, which report ``n``): the same values, 0.61-0.85 of the
+   time at 2x and at 1024² 4x (``benchmarks/bench_taau.py``, docs/temporal.md, "Speed").
 6. **History length**: ``n`` is capped at ``max_count / (1 + rotation / cap_angle)`` with
    ``rotation`` the view's rotation since the last frame (degrees): shading (headlight) and the
    parallax of semi-transparent layers change the image with the view direction, so history ages
@@ -67,6 +72,7 @@ _catmull_rom_weights, _history_column = CPU_STAGES.catmull_rom_weights, CPU_STAG
 _mix, _rectify = CPU_STAGES.catmull_rom_mix, CPU_STAGES.clamp_to_ycocg_bounds
 _nearest_depth, _history_weight = CPU_STAGES.nearest_depth, CPU_STAGES.history_weight
 STILL_BELOW = 1e-6  # degrees: a view rotating less than this between frames is still (a still camera, a pan, a zoom)
+SETTLING_MARGIN = 1.0 + 1e-6  # a splat weight settles a pixel where it exceeds the cap by this factor, past rounding
 
 
 @numba.njit(**_INNER)
@@ -82,8 +88,16 @@ def _column_box(lr, rows, i):
 
 
 @numba.njit(**_INNER)
-def _prepass_row(j, lr, motion, scale, dis_motion, box):
-    """LR row j: YCoCg min/max of each 3x3 neighbourhood (box[..., 0:6]) and the parallax flag (box[..., 6]).
+def _one_colour(box, j, i):
+    """Whether the 3x3 neighbourhood of LR pixel (j, i) is one colour: its YCoCg box (:func:`_prepass_row`) is a point."""
+    return box[j, i, 0] == box[j, i, 3] and box[j, i, 1] == box[j, i, 4] and box[j, i, 2] == box[j, i, 5]
+
+
+@numba.njit(**_INNER)
+def _prepass_row(j, lr, motion, scale, dis_motion, settled, box):
+    """LR row j: YCoCg min/max of each 3x3 neighbourhood (box[..., 0:6]) and the parallax flag (box[..., 6]); with
+    ``settled`` (every pixel of the frame settles: :func:`_row`) the flag only where the box is not one colour, the
+    only pixels the kernel then reads it at (0 elsewhere; its nine vectors: half the prepass's time).
 
     The box of column i is that of the column boxes of i - 1, i and i + 1 (edges repeated), kept as
     the row is walked: each pixel's colour is converted three times, not nine.
@@ -102,6 +116,9 @@ def _prepass_row(j, lr, motion, scale, dis_motion, box):
         box[j, i, 4] = max(max(left[4], mid[4]), right[4])
         box[j, i, 5] = max(max(left[5], mid[5]), right[5])
         left, mid = mid, right
+        if settled and _one_colour(box, j, i):
+            box[j, i, 6] = 0.0
+            continue
         spread = 0.0
         m0, m1 = motion[j, i, 0], motion[j, i, 1]
         for yy in rows:
@@ -137,16 +154,32 @@ def _fetch_columns(x, shift, run_tx, sx, width):
 
 @numba.njit(**_INNER)
 def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
-         rectify, out, new_history, keep_aux, aux):
+         rectify, out, new_history, keep_aux, aux, least_column_weight, settled):
     hr_h, hr_w = out.shape[0], out.shape[1]
     lr_h, lr_w = lr.shape[0], lr.shape[1]
     ly, y0, y1, dy0, wy0, wy1 = _row_window(y, scale, jy, lr_h, inv2s2)
+    # the row settles where every pixel's splat weight a = (wy0 + wy1) * (wx0 + wx1) exceeds the cap (see
+    # :func:`least_weight`; ``settled``: every row of the frame does): a flat pixel's weight min(n + a, cap) is then the
+    # cap whatever the history holds (n >= 0), so its history is not fetched
+    settles = settled or (not keep_aux and (wy0 + wy1) * least_column_weight > cap * SETTLING_MARGIN)
     # The HR pixels whose nearest LR sample is lx (a run: columns runs[lx] .. runs[lx + 1] - 1) share its
     # motion, depth and box, so the history's rows, their Catmull-Rom weights and the disocclusion gate are
     # found once per run; along the run the history is fetched at consecutive columns, so the vertical
     # Catmull-Rom pass of each column (k0..k3, columns ix - 1 .. ix + 2) is kept and slides by one column.
     for lx in range(lr_w):
         d = depth[ly, lx]
+        # one colour in all nine (the background around a volume, mostly): the clamp gives that colour whatever the
+        # history says and the splat (whose 2x2 samples lie among the nine) gives it too, so the run's pixels are that
+        # colour: no Catmull-Rom fetch (48 loads a pixel), splat or blend; only the history's weight is still fetched,
+        # and not even that where the row settles
+        if settles and rectify and _one_colour(box, ly, lx):
+            f0, f1, f2 = _to_rgb(box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2])
+            for x in range(runs[lx], runs[lx + 1]):
+                out[y, x, 0], out[y, x, 1], out[y, x, 2] = f0, f1, f2
+                new_history[y, x, 0], new_history[y, x, 1], new_history[y, x, 2] = f0, f1, f2
+                new_history[y, x, 3] = cap
+                new_history[y, x, 4] = d
+            continue
         mx = scale * motion[ly, lx, 0]
         sy = y + scale * motion[ly, lx, 1]
         rows_in = has_history and -0.5 < sy < hr_h - 0.5
@@ -157,9 +190,6 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         gated = disocclusion > 0.0 and box[ly, lx, 6] > 0.5
         lo0, lo1, lo2, hi0, hi1, hi2 = box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2], box[ly, lx, 3], box[ly, lx, 4], \
             box[ly, lx, 5]
-        # one colour in all nine (the background around a volume, mostly): the clamp gives that colour whatever the
-        # history says and the splat (whose 2x2 samples lie among the nine) gives it too, so the run's pixels are that
-        # colour: no Catmull-Rom fetch (48 loads a pixel), splat or blend; only the history's weight is still fetched
         flat = rectify and lo0 == hi0 and lo1 == hi1 and lo2 == hi2
         # along the run the history is fetched at one fraction past consecutive columns (x + floor(mx)): its weights
         # are the run's, found per pixel only where a fetch reaches the history's edge
@@ -256,18 +286,18 @@ def _kernels(sources: str):
     (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles them anew when it changes."""
 
     @numba.njit(parallel=True, cache=True)
-    def prepass(lr, motion, scale, dis_motion, box):
+    def prepass(lr, motion, scale, dis_motion, settled, box):
         sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
         for j in numba.prange(lr.shape[0]):
-            _prepass_row(j, lr, motion, scale, dis_motion, box)
+            _prepass_row(j, lr, motion, scale, dis_motion, settled, box)
 
     @numba.njit(parallel=True, cache=True)
     def kernel(history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
-               rectify, out, new_history, keep_aux, aux):
+               rectify, out, new_history, keep_aux, aux, least_column_weight, settled):
         sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
         for y in numba.prange(out.shape[0]):
             _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap,
-                 disocclusion, rectify, out, new_history, keep_aux, aux)
+                 disocclusion, rectify, out, new_history, keep_aux, aux, least_column_weight, settled)
 
     return prepass, kernel
 
@@ -300,6 +330,17 @@ def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> tupl
             lx += 1
     runs[lx:] = hr_w  # samples no column is nearest to (the last ones), and the end
     return cols, runs
+
+
+def least_weight(cols: np.ndarray) -> float:
+    """The least sum of an HR column's two Gaussian weights (``cols[:, 3] + cols[:, 4]`` of :func:`_columns`; of a row's
+    where the columns are those of the rows, with the vertical jitter). A pixel's splat weight ``a`` is the product of
+    its column's sum and its row's, so where the two least sums' product exceeds the history cap (by
+    :data:`SETTLING_MARGIN`) every pixel of the frame *settles*: a flat pixel's new weight ``min(n + a, cap)`` is the cap
+    whatever its history holds, which then is not fetched (with :attr:`TemporalUpsampler.side_outputs`, which report
+    ``n``, it is). A rotating view's cap lies below the least ``a`` at 2x and often at 4x (0.52 at ``sigma`` 0.35,
+    halfway between four samples; the cap at 2° a frame: 0.5 at 2x, 1 at 4x, a quarter of that sampled finely)."""
+    return float((cols[:, 3] + cols[:, 4]).min())
 
 
 def output_image(out: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
@@ -466,13 +507,16 @@ class TemporalUpsampler:
         cols, runs = self._columns(w, jx, sigma)
         if self._box is None or self._box.shape[:2] != (h, w):
             self._box = np.empty((h, w, 8), dtype=np.float32)
-        _prepass(lr, motion, s, self.dis_motion, self._box)
+        least_column = least_weight(cols)
+        settled = not static and not self.side_outputs and \
+            least_column * least_weight(self._columns(h, jy, sigma)[0]) > cap * SETTLING_MARGIN
+        _prepass(lr, motion, s, self.dis_motion, settled, self._box)
         new_history = self._spare if self._spare is not None and self._spare.shape == shape else \
             np.empty(shape, dtype=np.float32)
         out = output_image(out, shape[:2])
         aux = np.empty(shape[:2] + (4,) if self.side_outputs else (1, 1, 4), dtype=np.float32)
         _kernel(history, has, lr, motion, depth_arr, self._box, cols, runs, s, jy, inv2s2, tent, cap, disocclusion,
-                not static, out, new_history, self.side_outputs, aux)
+                not static, out, new_history, self.side_outputs, aux, least_column, settled)
         self.last_aux = aux if self.side_outputs else None
         self._spare = self.history if has else None
         self.history = new_history
