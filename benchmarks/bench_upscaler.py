@@ -1,8 +1,9 @@
-"""Milliseconds per frame of ``StatefulUpscaler.upscale`` for the shipped U-Nets, on rendered orbit frames, side by side
+"""Milliseconds per frame of ``StatefulUpscaler.upscale`` for a shipped model, on rendered orbit frames, side by side
 with an earlier commit's upscaler.
 
     python benchmarks/bench_upscaler.py --against COMMIT [--volume CT_AVM.nii.gz:CT-AAA:0,446] [--sizes 512,1024]
-                                        [--scales 2,4] [--variant S] [--degrees 2] [--frames 16] [--passes 3]
+                                        [--scales 2,4] [--variant S] [--stretch 1] [--degrees 2] [--frames 16]
+                                        [--passes 3]
 
 Each frame of the orbit is rendered once, as ``Pipeline`` renders it for the variant's model at that scale (Halton
 jitter, the previous camera, the depth slabs the model runs on; ray starts jittered), and goes through the current
@@ -10,6 +11,8 @@ jitter, the previous camera, the depth slabs the model runs on; ray starts jitte
 their order swapped each frame so that machine noise hits both alike. The table gives each one's median ms per
 frame (the time after the render: TAAU, the network and the layout around it; the first four frames of a pass
 not counted), their ratio and the largest difference between their images; each pass starts both histories afresh.
+``--stretch 2`` runs each scale as the model of half of it stretched by 2 (``Pipeline(..., stretch=2)``: "VolSR XS 2x
++ bicubic 2x" at ``--scales 4``).
 """
 from __future__ import annotations
 
@@ -32,7 +35,8 @@ WARMUP = 4
 def time_side_by_side(pipeline: Pipeline, modules: list, cameras: list, passes: int) -> tuple[list[float], float]:
     """Median ms per ``upscale`` of each module's ``StatefulUpscaler`` (current first) over ``passes`` passes of
     ``cameras``, interleaved frame by frame, and the largest difference between their images."""
-    upscalers = [module.StatefulUpscaler(pipeline.engine, slabs=pipeline.slabs) for module in modules]
+    upscalers = [module.StatefulUpscaler(pipeline.engine, slabs=pipeline.slabs, stretch=pipeline.stretch)
+                 for module in modules]
     width, height = pipeline.low_resolution_size
     times: list[list[float]] = [[] for _ in modules]
     difference = 0.0
@@ -41,7 +45,7 @@ def time_side_by_side(pipeline: Pipeline, modules: list, cameras: list, passes: 
             upscaler.reset()
         previous = None
         for t, camera in enumerate(cameras):
-            frame = pipeline.caster.render(camera, width, height, jitter=halton_jitter(t, jitter_phases(pipeline.scale)),
+            frame = pipeline.caster.render(camera, width, height, jitter=halton_jitter(t, jitter_phases(pipeline.model_scale)),
                                            previous_camera=previous, seed=t, slabs=pipeline.slabs)
             previous = camera
             images: dict[int, np.ndarray] = {}
@@ -59,6 +63,7 @@ def main() -> None:
     parser.set_defaults(frames=16)
     parser.add_argument("--variant", default="S")
     parser.add_argument("--passes", type=int, default=3)
+    parser.add_argument("--stretch", type=int, default=1, choices=(1, 2))
     args = parser.parse_args()
     if not args.against:
         parser.error("--against COMMIT is required: the upscaler to compare with")
@@ -70,9 +75,11 @@ def main() -> None:
         for size in (int(s) for s in args.sizes.split(",")):
             for scale in (int(s) for s in args.scales.split(",")):
                 pipeline = Pipeline(scene.volume, scene.transfer_function, scale=scale, variant=args.variant,
-                                    size=(size, size), threads=2)
+                                    size=(size, size), threads=2, stretch=args.stretch)
                 ms, difference = time_side_by_side(pipeline, modules, cameras, args.passes)
-                model = f"{args.variant} {scale}x" + (f" in {pipeline.slabs} slabs" if pipeline.slabs else "")
+                model = f"{args.variant} {scale // args.stretch}x" + (f" in {pipeline.slabs} slabs" if pipeline.slabs
+                                                                     else "")
+                model += f" + bicubic {args.stretch}x" if args.stretch > 1 else ""
                 print(table_row(f"| {size}² | {model}", ms, difference), flush=True)
 
 

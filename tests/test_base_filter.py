@@ -419,3 +419,58 @@ def test_volsr_train_fits_xs_on_the_layered_taau_and_without_a_bias_black_stays_
     with pytest.raises(InputError, match=r"v000\d\.h5: holds 0 depth slabs at 4x \(lr4/slabs\), the network refines "
                                          r"the layered TAAU of 2: make the dataset with `slabs: 2`"):
         SequenceDataset(tiny_sequences, "train", 4, 0, None, augment=False, taau=fitted.config)
+
+
+@pytest.mark.parametrize("orientations, stretch", [(1, 1), (2, 1), (1, 2), (2, 2)])
+def test_a_filter_told_where_the_image_is_one_colour_around_makes_the_image_it_makes_of_it_whole(orientations,
+                                                                                                 stretch):
+    """``window``: the kernels run on the window widened by the filter's reach alone and the rest of the output takes
+    what the filter makes of the colour around it; the same image as filtering it whole, to float rounding (windows
+    inside the image, at its edges, empty and whole; clipped and not; one work buffer set for windows of every
+    size)."""
+    rng = np.random.default_rng(20 + orientations)
+    weights = rng.normal(0, 0.2, (orientations, 3, 5, 5)).astype(np.float32)
+    weights[:, :, 2, 2] += 1.0
+    bias = rng.normal(0, 0.05, (orientations, 3)).astype(np.float32)
+    scratch = Scratch()
+    height, width = 2 * BAND_ROWS + 9, 70
+    for window in ((20, 50, 30, 60), (0, 30, 0, width), (40, height, 50, width), (30, 30, 9, 9), (0, height, 0, width),
+                   (3, height - 2, 1, width - 3)):
+        image = np.empty((height, width, 3), np.float32)
+        image[:] = (0.2, 0.45, 0.8)
+        top, bottom, left, right = window
+        image[top:bottom, left:right] = rng.random((bottom - top, right - left, 3)) * 1.4 - 0.2
+        for clip in (True, False):
+            whole = filter_image(image, weights, bias, clip_output=clip, stretch=stretch, stretch_a=-0.75)
+            windowed = filter_image(image, weights, bias, scratch=scratch, clip_output=clip, stretch=stretch,
+                                    stretch_a=-0.75, window=window)
+            assert windowed.shape == whole.shape and np.abs(windowed - whole).max() <= 1e-6
+
+
+@pytest.mark.parametrize("slabs, stretch", [(0, 1), (0, 2), (2, 1), (2, 2)])
+def test_an_xs_upscaler_filters_its_taau_estimate_where_it_is_not_the_background_alone(tmp_path, slabs, stretch):
+    """The upscaler passes the filter the window its TAAU knows its estimate to be the background outside (one layer
+    or in depth slabs, the image stretched or not, on a light background): the same frames, to float rounding, as the
+    filter run on the whole estimate, and the window leaves out much of the frame."""
+    net = random_filter(SuperResolutionNet(variant_config("XS", 2, taau_base=True)))
+    path = export_onnx(net, tmp_path / "xs.onnx")
+    volume = Volume.from_record(make_phantom(shape=(48, 48, 48), spacing=(2.0, 2.0, 2.0)))
+    runs, windows = [], []
+    for windowed in (True, False):
+        pipeline = Pipeline(volume, get_preset("CT-Phantom"), path, scale=2 * stretch, size=(96, 80), threads=2,
+                            slabs=slabs, stretch=stretch, background=(0.76, 0.76, 0.87))
+        taau = pipeline.upscaler.history.taau
+        if not windowed:
+            taau.background_window = lambda: None
+        cameras = orbit_around(pipeline.caster.visible_bounds(), 5, 2.0, aspect=96 / 80, fill=0.5)
+        frames = []
+        for camera in cameras:
+            frames.append(pipeline.render(camera))
+            if windowed:
+                windows.append(taau.background_window())
+        runs.append(frames)
+    for with_window, whole in zip(*runs):
+        assert np.abs(with_window - whole).max() <= 1e-6
+    lr_w, lr_h = 96 // (2 * stretch), 80 // (2 * stretch)
+    shares = [(b - t) * (r - l) / (4 * lr_w * lr_h) for t, b, l, r in windows]
+    assert max(shares) < 0.8, f"the phantom fills {shares} of the frame: the window is not tested"

@@ -143,6 +143,29 @@ def test_a_slab_history_is_zero_exactly_where_the_slab_shows_nothing_around_fram
         assert np.all(up.history[1][..., 4] > 0.0)
 
 
+@pytest.mark.parametrize("scale", [2, 4])
+def test_outside_its_background_window_the_layered_estimate_is_the_background(scale):
+    """A patch shown in one slab, jittered and rotating: outside the window the layered TAAU reports, its estimate is
+    the background exactly (it composites its slabs only within a 3x3 LR neighbourhood of what shows); the patch
+    lies inside it; before any frame the window is unknown, and with nothing shown it is empty."""
+    rng = np.random.default_rng(12)
+    n, background = 16, (0.76, 0.76, 0.87)
+    up = LayeredUpsampler(scale)
+    assert up.background_window() is None
+    for t in range(3):
+        slabs = np.zeros((2, n, n, 6), dtype=np.float32)
+        slabs[1, 6:9, 5:11, :4] = (0.3, 0.2, 0.1, 0.6)
+        slabs[..., 4:6] = rng.uniform(-1, 1, (2, n, n, 2))
+        out = up(slabs, halton_jitter(t, jitter_phases(scale)), background, rotation=2.0)
+        top, bottom, left, right = up.background_window()
+        assert (top, bottom, left, right) == (4 * scale, 11 * scale, 3 * scale, 13 * scale)  # the 3x3, 1 LR px more
+        outside = np.ones(out.shape[:2], bool)
+        outside[top:bottom, left:right] = False
+        assert np.all(out[outside] == np.float32(background)) and np.any(out[~outside] != np.float32(background))
+    up(np.zeros((2, n, n, 6), np.float32), (0.0, 0.0), background, rotation=2.0)
+    assert up.background_window() == (0, 0, 0, 0)
+
+
 @pytest.mark.parametrize("rotation, clamp_rotating, pixels_per_voxel, clamps", [
     (0.0, "never", None, True),  # a pan: clamped whatever the setting
     (2.0, "never", 0.5, False),

@@ -384,6 +384,33 @@ def test_a_flat_pixel_drops_a_history_in_front_of_it_where_the_neighbourhood_sho
     np.testing.assert_array_equal(up.history[..., 3], fresh.history[..., 3])
 
 
+@pytest.mark.parametrize("scale", [2, 4])
+def test_outside_its_background_window_the_estimate_is_the_background_as_taau_writes_it(scale):
+    """A frame of a light background with a patch of colours, rotating: outside the window TAAU reports the estimate
+    is one colour (the background through YCoCg and back, the box's colour), inside it lies the patch; unknown
+    (None) without the background, on a static frame, and before any frame."""
+    n, background = 16, (0.76, 0.76, 0.87)
+    rng = np.random.default_rng(9)
+    up = TemporalUpsampler(scale, side_outputs=False)
+    assert up.background_window() is None
+    for t in range(3):
+        lr = np.empty((n, n, 3), np.float32)
+        lr[:] = background
+        lr[5:9, 6:11] = rng.random((4, 5, 3))
+        motion = rng.uniform(-0.5, 0.5, (n, n, 2)).astype(np.float32)
+        out = up(lr, motion, halton_jitter(t, jitter_phases(scale)), rotation=2.0, background=background)
+        top, bottom, left, right = up.background_window()
+        assert (top, bottom, left, right) == (3 * scale, 11 * scale, 4 * scale, 13 * scale)  # the patch, 2 LR px more
+        outside = np.ones(out.shape[:2], bool)
+        outside[top:bottom, left:right] = False
+        assert np.all(out[outside] == out[0, 0]) and np.abs(out[0, 0] - background).max() < 1e-6
+        assert np.any(out[top:bottom, left:right] != out[0, 0])
+    up(lr, np.zeros((n, n, 2), np.float32), (0.0, 0.0), rotation=0.0, background=background)
+    assert up.background_window() is None, "a static frame: the unclamped blend"
+    up(lr, motion, (0.0, 0.0), rotation=2.0)
+    assert up.background_window() is None, "no background given"
+
+
 # -- fine sampling: the bilinear blend and the shorter history -------------------------------------
 def test_smoothing_ramps_with_the_output_pixels_per_voxel():
     up = TemporalUpsampler(2)  # smooth between 1.75 and 2.75 output px per voxel

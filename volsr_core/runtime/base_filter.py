@@ -9,7 +9,10 @@ it: a thread takes a band of :data:`BAND_ROWS` rows, lays its clipped, padded ch
 pixel's taps row by row (the tap count compiled in, so the taps unroll and the pixels vectorise; a pair finds
 each row's orientations from the same band, sums both filters in the same pass and blends) and interleaves the
 result; where every tap of a pixel reads one colour (the background either side of a volume: 65-85% of a bench
-frame's pixels) the sum is one constant per row end and channel, computed once. Work buffers stay in a
+frame's pixels) the sum is one constant per row end and channel, computed once. Told the window outside which the
+image is one colour (``filter_image(..., window=)``: the upscaler passes the one its TAAU reports), the kernels run on
+that window alone, read in place, and the rest of the output takes what the filter makes of that colour (0.84-0.97 of
+the upscaler's step for XS at 512² and 1024², ``benchmarks/bench_upscaler.py``). Work buffers stay in a
 :class:`Scratch` between frames. On TAAU's 512² estimates (2 cores, medians, ``benchmarks/bench_base_filter.py``):
 1.6 ms for the 5x5 pair of XS 2x and for a 9x9 filter (XS 4x's until 2026-11-25, now 5x5: 1.1 ms;
 docs/network.md), where onnxruntime's depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9), on a faster machine,
@@ -22,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 from pathlib import Path
 from typing import Callable
 
@@ -44,13 +48,17 @@ class Scratch:
 
     def __init__(self) -> None:
         self._buffers: dict[str, np.ndarray] = {}
+        self.patterns: dict[tuple, np.ndarray] = {}  # :func:`filter_image`'s output around a window, by colour
 
     def get(self, name: str, shape: tuple[int, ...], dtype: type = np.float32) -> np.ndarray:
-        """The buffer ``name`` of ``shape`` (contents undefined), made anew only when the shape changes."""
+        """The C-contiguous buffer ``name`` of ``shape`` (contents undefined): a view of one kept array, made anew only
+        when it is too small (or of another dtype), so that every size up to the largest asked shares it (a window
+        whose size changes every frame makes no new arrays)."""
+        size = math.prod(shape)
         buffer = self._buffers.get(name)
-        if buffer is None or buffer.shape != shape:
-            buffer = self._buffers[name] = np.empty(shape, dtype)
-        return buffer
+        if buffer is None or buffer.size < size or buffer.dtype != np.dtype(dtype):
+            buffer = self._buffers[name] = np.empty(size, dtype)
+        return buffer[:size].reshape(shape)
 
 
 BAND_ROWS = 32
@@ -63,15 +71,16 @@ _NO_PHASES = _doubling_weights(1, 3, True, -0.5)  # an unstretched call's (read-
 
 
 @numba.njit(**_NB)
-def _fill_band(image: np.ndarray, first: int, pad: int, planes: np.ndarray, rows: int) -> None:
-    """The first ``rows`` rows of a band's ``planes`` (3, >= rows, W + 2 ``pad``): RGB image rows ``first`` + j (edge
-    rows repeated past the image), clipped to [0, 1], channels apart, ``pad`` edge pixels repeated each side; each
-    image row read once, pixel by pixel (a pass per channel reading every third float made XS 4x's filter take 1.2
-    times as long, ``benchmarks/bench_base_filter.py``)."""
-    height, width = image.shape[0], image.shape[1]
+def _fill_band(image: np.ndarray, top: int, left: int, height: int, width: int, first: int, pad: int,
+               planes: np.ndarray, rows: int) -> None:
+    """The first ``rows`` rows of a band's ``planes`` (3, >= rows, ``width`` + 2 ``pad``): RGB rows ``first`` + j of
+    the window of ``image`` (``height`` x ``width`` pixels from (``top``, ``left``); edge rows repeated past it),
+    clipped to [0, 1], channels apart, ``pad`` edge pixels repeated each side; each image row read once, pixel by
+    pixel (a pass per channel reading every third float made XS 4x's filter take 1.2 times as long,
+    ``benchmarks/bench_base_filter.py``)."""
     zero, one = np.float32(0.0), np.float32(1.0)
     for j in range(rows):
-        source = image[min(max(first + j, 0), height - 1)].reshape(width * 3)
+        source = image[top + min(max(first + j, 0), height - 1)].reshape(image.shape[1] * 3)[3 * left:]
         red, green, blue = planes[0, j, pad:], planes[1, j, pad:], planes[2, j, pad:]
         for x in range(width):
             red[x] = min(max(source[3 * x], zero), one)
@@ -79,9 +88,9 @@ def _fill_band(image: np.ndarray, first: int, pad: int, planes: np.ndarray, rows
             blue[x] = min(max(source[3 * x + 2], zero), one)
         for c in range(3):
             row = planes[c, j]
-            left, right = row[pad], row[pad + width - 1]
+            first_value, last_value = row[pad], row[pad + width - 1]
             for x in range(pad):
-                row[x], row[width + pad + x] = left, right
+                row[x], row[width + pad + x] = first_value, last_value
 
 
 @numba.njit(**_NB)
@@ -192,29 +201,32 @@ def _interleaved(planes: np.ndarray, low: np.float32, high: np.float32, out: np.
 @functools.lru_cache(maxsize=None)
 def _filter_bands(taps: int, doubled: bool) -> Callable:
     """The kernel for one filter of ``taps`` x ``taps`` (compiled once per size and ``doubled``, cached on disk):
-    ``bands(image, weights, bias, low, high, planes, ends, total, lines, phase_w, out)`` fills ``out`` (H, W, C) from
-    ``image`` (H, W, C) through ``weights`` (1, C, k, k) and ``bias`` (1, C), :data:`BAND_ROWS` rows per band
+    ``bands(image, top, left, height, width, weights, bias, low, high, planes, ends, total, lines, phase_w, out,
+    out_top, out_left)`` fills ``out`` from the window of ``image`` (H, W, C) ``height`` x ``width`` pixels from
+    (``top``, ``left``) through ``weights`` (1, C, k, k) and ``bias`` (1, C), :data:`BAND_ROWS` rows per band
     (``planes`` (bands, C, BAND_ROWS + k - 1, W + k - 1), ``ends`` (bands, BAND_ROWS + k - 1, 2) int64 and ``total``
     (bands, C, W) its work buffers): the band's clipped, padded planes (:func:`_fill_band`) and their rows' flat ends
     (:func:`_flat_ends`), then per row and channel, per tap row, each pixel's ``taps`` products summed in registers
     into a row accumulator (the tap count a compile-time constant, so the taps unroll and the pixels vectorise:
     1.7 times as fast at 9 taps as a pass per tap over the row) between the row's flat ends
     (:func:`_sums_needed`; one constant each side), then the row's channels clamped to [``low``, ``high``] and
-    interleaved into ``out`` (:func:`_interleaved`).
+    interleaved into ``out`` (:func:`_interleaved`), the window's row y into row ``out_top`` + y from column
+    ``out_left`` on.
     ``doubled``: each row goes into the band's row of ``lines`` (bands, C, W), channels apart, instead and is written
     to ``out`` (H, 2W, C) doubled in width by the resampling's first stage (``_across_planes_doubled`` with
     ``phase_w``): the first pass of the filter and a 2x stretch in one (:func:`filter_image`)."""
     pad = taps // 2
 
     @numba.njit(parallel=True, **_NB)
-    def bands(image, weights, bias, low, high, planes, ends, total, lines, phase_w, out):
-        height, width, channels = image.shape
+    def bands(image, top, left, height, width, weights, bias, low, high, planes, ends, total, lines, phase_w, out,
+              out_top, out_left):
+        channels = image.shape[2]
         last = planes.shape[3] - 1
         for b in numba.prange(planes.shape[0]):
             y0 = b * BAND_ROWS
             y1 = min(y0 + BAND_ROWS, height)
             band, row_total, line = planes[b], total[b], lines[b]
-            _fill_band(image, y0 - pad, pad, band, y1 - y0 + 2 * pad)
+            _fill_band(image, top, left, height, width, y0 - pad, pad, band, y1 - y0 + 2 * pad)
             _flat_ends(band, y1 - y0 + 2 * pad, ends[b])
             for y in range(y0, y1):
                 start, stop = _sums_needed(band, ends[b], y - y0, taps, width)
@@ -239,16 +251,17 @@ def _filter_bands(taps: int, doubled: bool) -> Callable:
                 if doubled:
                     _across_planes_doubled(line, phase_w, out[y].reshape(out.shape[1] * out.shape[2]))
                 else:
-                    _interleaved(row_total, low, high, out[y])
+                    _interleaved(row_total, low, high, out[out_top + y][out_left:out_left + width])
 
     return bands
 
 
 @functools.lru_cache(maxsize=None)
 def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
-    """:func:`_filter_bands` for a pair (``bands(image, weights, bias, luma_weights, smoothing, low, high, planes,
-    ends, luma, across, work, lines, phase_w, out)``, ``weights`` (2, C, k, k), ``bias`` (2, C), ``lines``,
-    ``phase_w`` and ``doubled`` as there; per band, ``planes`` (C, BAND_ROWS + 2 * halo, W + k - 1) with halo =
+    """:func:`_filter_bands` for a pair (``bands(image, top, left, height, width, weights, bias, luma_weights,
+    smoothing, low, high, planes, ends, luma, across, work, lines, phase_w, out, out_top, out_left)``, ``weights``
+    (2, C, k, k), ``bias`` (2, C), the window, ``lines``, ``phase_w``, ``out`` and its offsets and ``doubled`` as
+    there; per band, ``planes`` (C, BAND_ROWS + 2 * halo, W + k - 1) with W the window's width, halo =
     max(k // 2, r + 1) for ``smoothing``'s radius r, ``ends`` of its rows, ``luma`` of the planes' rows, ``across``
     (BAND_ROWS + 2r, W) and ``work`` (2 + 2C, W + 2r): a row of the orientation's products, the C channels' sums
     of the first filter, of the second, and the pick): the band's orientation stages (:func:`_band_orientation`), then
@@ -258,9 +271,9 @@ def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
     pad = taps // 2
 
     @numba.njit(parallel=True, **_NB)
-    def bands(image, weights, bias, luma_weights, smoothing, low, high, planes, ends, luma, across, work, lines,
-              phase_w, out):
-        height, width, channels = image.shape
+    def bands(image, top, left, height, width, weights, bias, luma_weights, smoothing, low, high, planes, ends, luma,
+              across, work, lines, phase_w, out, out_top, out_left):
+        channels = image.shape[2]
         r = smoothing.shape[0] // 2
         halo = max(pad, r + 1)
         last = planes.shape[3] - 1
@@ -270,7 +283,7 @@ def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
             band, line = planes[b], lines[b]
             # per channel its first filter's and its second's sums, then which one each pixel takes
             first, other, pick = work[b, 1:1 + channels], work[b, 1 + channels:1 + 2 * channels], work[b, -1]
-            _fill_band(image, y0 - halo, pad, band, y1 - y0 + 2 * halo)
+            _fill_band(image, top, left, height, width, y0 - halo, pad, band, y1 - y0 + 2 * halo)
             _flat_ends(band, y1 - y0 + 2 * halo, ends[b])
             _band_orientation(band, y0, y1, height, halo, pad, luma_weights, smoothing, luma[b], across[b],
                               work[b, 0])
@@ -311,14 +324,58 @@ def _filter_bands_pair(taps: int, doubled: bool) -> Callable:
                 if doubled:
                     _across_planes_doubled(line, phase_w, out[y].reshape(out.shape[1] * out.shape[2]))
                 else:
-                    _interleaved(first, low, high, out[y])
+                    _interleaved(first, low, high, out[out_top + y][out_left:out_left + width])
 
     return bands
 
 
+def filter_reach(weights: np.ndarray, stretch: int = 1) -> int:
+    """How far (image pixels) a pixel of :func:`filter_image`'s input reaches into its output: the filter's radius, for
+    a pair at least the orientation's (its central differences and smoothing), and the stretch's cubic taps."""
+    pad = weights.shape[2] // 2
+    reach = pad if weights.shape[0] == 1 else max(pad, SMOOTHING.shape[0] // 2 + 1)
+    return reach + (2 if stretch == 2 else 0)
+
+
+@numba.njit(parallel=True, **_NB)
+def _fill_outside(out: np.ndarray, pattern: np.ndarray, top: int, bottom: int, left: int, right: int) -> None:
+    """``out`` (H, W, C) outside rows ``top`` .. ``bottom`` - 1 by columns ``left`` .. ``right`` - 1 from ``pattern``
+    (s, W * C): row y takes ``pattern[y % s]``, the filtered colour's values by output phase, a row laid out ahead."""
+    width = out.shape[1] * out.shape[2]
+    flat = out.reshape(out.shape[0], width)
+    a, b = left * out.shape[2], right * out.shape[2]
+    for y in numba.prange(out.shape[0]):
+        row, values = flat[y], pattern[y % pattern.shape[0]]
+        if y < top or y >= bottom:
+            row[:] = values
+        else:
+            row[:a] = values[:a]
+            row[b:] = values[b:]
+
+
+def _outside_pattern(colour: np.ndarray, weights: np.ndarray, bias: np.ndarray, clip_output: bool, stretch: int,
+                     stretch_a: float, width: int, scratch: Scratch) -> np.ndarray:
+    """What :func:`filter_image` makes of an image of one ``colour`` away from its edges, by output phase, laid out
+    along an output row ``width`` pixels wide: (stretch, width * 3), row p for the output rows y with y % stretch = p.
+    Found once per colour, filter and width on a small image of that colour (the same sums as the whole image's, so
+    the same values), kept in ``scratch``."""
+    key = (colour.tobytes(), weights.tobytes(), bias.tobytes(), clip_output, stretch, float(stretch_a), width)
+    patterns = scratch.patterns
+    if key not in patterns:
+        if len(patterns) > 16:
+            patterns.clear()
+        size = 2 * filter_reach(weights, stretch) + 4
+        small = filter_image(np.broadcast_to(colour, (size, size, 3)), weights, bias, clip_output=clip_output,
+                             stretch=stretch, stretch_a=stretch_a)
+        middle = (size // 2) * stretch
+        phases = small[middle:middle + stretch, middle:middle + stretch]  # (stretch, stretch, 3)
+        patterns[key] = np.ascontiguousarray(np.tile(phases, (1, width // stretch, 1)).reshape(stretch, width * 3))
+    return patterns[key]
+
+
 def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
                  scratch: Scratch | None = None, clip_output: bool = False, stretch: int = 1,
-                 stretch_a: float = -0.5) -> np.ndarray:
+                 stretch_a: float = -0.5, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
     """``image`` (H, W, 3), clipped to [0, 1] and edge-padded, through ``weights`` (n, 3, k, k) and ``bias``
     (n, 3), n = 1 or a pair chosen per pixel by orientation: a new (H, W, 3) float32 image, what the network's
     :class:`~volsr_core.sr.network.BaseFilter` computes (channels first there). ``scratch`` keeps the work
@@ -328,24 +385,54 @@ def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
     ``stretch`` 2 returns the result stretched to (2H, 2W, 3) by Keys' cubic convolution with ``stretch_a``
     (:func:`~volsr_core.temporal.resample.resize_bicubic`'s values, clipped as the result is): each filtered row is
     doubled in width as the filter's bands make it, then the rows are mixed, so the filtered image is never written
-    whole (the stretch of ``Pipeline(..., stretch=2)``)."""
+    whole (the stretch of ``Pipeline(..., stretch=2)``).
+
+    ``window`` (top, bottom, left, right; image pixels, bottom and right exclusive), where the caller knows the image
+    to be one colour outside it (the background around a volume in a TAAU estimate): the kernels run on the window
+    widened by :func:`filter_reach` alone and the rest of the output takes what they make of that colour, found
+    once; the same values (the background's sums are the same sums), in the time of the window's pixels."""
     if stretch not in (1, 2):
         raise ValueError(f"the filter's stretch is 1 or 2, got {stretch!r}")
     scratch = Scratch() if scratch is None else scratch
-    image = np.ascontiguousarray(image, dtype=np.float32)
     weights = np.ascontiguousarray(weights, dtype=np.float32)
     bias = np.asarray(bias, dtype=np.float32)
-    height, width, channels = image.shape
+    height, width, channels = np.shape(image)
+    top, bottom, left, right = 0, height, 0, width
+    if window is not None:
+        reach = filter_reach(weights, stretch)
+        top, bottom = max(int(window[0]) - reach, 0), min(int(window[1]) + reach, height)
+        left, right = max(int(window[2]) - reach, 0), min(int(window[3]) + reach, width)
+        if bottom <= top or right <= left:
+            top = bottom = left = right = 0
+    out = np.empty((stretch * height, stretch * width, channels), np.float32)
+    if (top, bottom, left, right) != (0, height, 0, width):  # one colour around the window: a corner pixel's
+        corner = image[0, 0] if top > 0 or left > 0 else image[height - 1, width - 1]
+        pattern = _outside_pattern(np.asarray(corner, np.float32), weights, bias, clip_output, stretch,
+                                   float(stretch_a), stretch * width, scratch)
+        _fill_outside(out, pattern, stretch * top, stretch * bottom, stretch * left, stretch * right)
+        if bottom <= top:
+            return out
+    _filter_window(np.ascontiguousarray(image, dtype=np.float32), (top, bottom, left, right), weights, bias, scratch,
+                   clip_output, stretch, float(stretch_a), out)
+    return out
+
+
+def _filter_window(image: np.ndarray, window: tuple[int, int, int, int], weights: np.ndarray, bias: np.ndarray,
+                   scratch: Scratch, clip_output: bool, stretch: int, stretch_a: float, out: np.ndarray) -> None:
+    """:func:`filter_image`'s kernels on the ``window`` (top, bottom, left, right) of the C-contiguous ``image`` (H, W,
+    3), read in place, into the same window of ``out`` (scaled by ``stretch``); edge pixels repeated past the window."""
+    top, bottom, left, right = window
+    height, width, channels = bottom - top, right - left, image.shape[2]
     pad = weights.shape[2] // 2
     n_bands = -(-height // BAND_ROWS)
     doubled = stretch == 2
     # doubled, the bands write their rows doubled in width into ``rows``, and the rows are mixed into ``out`` after
-    out = np.empty((stretch * height, stretch * width, channels), np.float32)
     rows = scratch.get("doubled rows", (height, 2 * width, channels)) if doubled else out
     lines = scratch.get("lines", (n_bands, channels, width) if doubled else (1, 1, 1))
-    phase_w = _doubling_weights(width, 2 * width, True, float(stretch_a)) if doubled else _NO_PHASES
+    phase_w = _doubling_weights(width, 2 * width, True, stretch_a) if doubled else _NO_PHASES
     # the kernels clamp as they write ``out``; unclipped, to finite bounds (their fastmath assumes no infinities)
     low, high = (np.float32(0.0), np.float32(1.0)) if clip_output else (-_FLOAT32_MAX, _FLOAT32_MAX)
+    band_top, band_left = (0, 0) if doubled else (top, left)  # doubled, the bands write into ``rows``
     if weights.shape[0] > 1:
         r = SMOOTHING.shape[0] // 2
         band_rows = BAND_ROWS + 2 * max(pad, r + 1)
@@ -354,18 +441,18 @@ def filter_image(image: np.ndarray, weights: np.ndarray, bias: np.ndarray,
         across = scratch.get("across", (n_bands, BAND_ROWS + 2 * r, width))
         work = scratch.get("work", (n_bands, 2 + 2 * channels, width + 2 * r))
         ends = scratch.get("ends", (n_bands, band_rows, 2), np.int64)
-        _filter_bands_pair(weights.shape[2], doubled)(image, weights, bias, LUMA, SMOOTHING, low, high, planes, ends,
-                                                      luma, across, work, lines, phase_w, rows)
+        _filter_bands_pair(weights.shape[2], doubled)(image, top, left, height, width, weights, bias, LUMA, SMOOTHING,
+                                                      low, high, planes, ends, luma, across, work, lines, phase_w,
+                                                      rows, band_top, band_left)
     else:
         planes = scratch.get("planes", (n_bands, channels, BAND_ROWS + 2 * pad, width + 2 * pad))
         total = scratch.get("total", (n_bands, channels, width))
         ends = scratch.get("ends", (n_bands, BAND_ROWS + 2 * pad, 2), np.int64)
-        _filter_bands(weights.shape[2], doubled)(image, weights, bias, low, high, planes, ends, total, lines, phase_w,
-                                                 rows)
+        _filter_bands(weights.shape[2], doubled)(image, top, left, height, width, weights, bias, low, high, planes,
+                                                 ends, total, lines, phase_w, rows, band_top, band_left)
     if doubled:
-        _mix_rows(rows.reshape(height, 2 * width * channels), *_axis_taps(height, 2 * height, True, float(stretch_a)),
-                  low, high, out)
-    return out
+        _mix_rows(rows.reshape(height, 2 * width * channels), *_axis_taps(height, 2 * height, True, stretch_a),
+                  low, high, out, 2 * top, 2 * left)
 
 
 def filter_metadata(weights: np.ndarray, bias: np.ndarray) -> str:

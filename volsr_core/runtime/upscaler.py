@@ -378,7 +378,10 @@ class StatefulUpscaler:
             return self._stretched(self._device_filter.filter(base, clip_output=True))
         if base is None:  # not TAAU-based: the filter sharpens the bilinear upscale
             base = upscale_bilinear(colour, self.config.scale)
+        # where the estimate is known to be the background colour, the filter makes one colour too: it runs inside
+        window = None if self.history.taau is None else self.history.taau.background_window()
         if self.stretch == 2:  # the filter's bands double their rows as they make them: no filtered image in between
             return filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True, stretch=2,
-                                stretch_a=STRETCH_CUBIC_A)
-        return self._stretched(filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True))
+                                stretch_a=STRETCH_CUBIC_A, window=window)
+        return self._stretched(filter_image(base, *self.base_filter, scratch=self._scratch, clip_output=True,
+                                            window=window))

@@ -124,7 +124,7 @@ class HistoryFeed:
             estimate = [self.taau(slabs, jitter, background, rotation, pixels_per_voxel, out=out)]
         elif self.taau is not None:
             estimate = [self.taau(colour, motion, jitter, depth, rotation,
-                                  pixels_per_voxel if self.fine_sampling else None, out=out)]
+                                  pixels_per_voxel if self.fine_sampling else None, background=background, out=out)]
             if self.taau_aux:
                 estimate.append(self.taau.last_aux)
         return pick_history(self.mode, None if self.previous is None else [self.previous], estimate)

@@ -189,9 +189,10 @@ class CudaTemporalUpsampler(TemporalUpsampler):
         self._moving = MotionFlag()
 
     def __call__(self, lr_color, lr_motion, jitter: tuple[float, float], depth=None, rotation: float | None = None,
-                 pixels_per_voxel: float | None = None, *, out=None):
+                 pixels_per_voxel: float | None = None, *, background=None, out=None):
         """As :meth:`TemporalUpsampler.__call__`; returns a new (h * scale, w * scale, 3) float32 device array, or
-        ``out`` (a device array of that shape) written with it."""
+        ``out`` (a device array of that shape) written with it. ``background`` is not read: on the GPU the filter
+        runs on the whole frame (:meth:`background_window` stays None)."""
         lr, motion = _device(lr_color), _device(lr_motion)
         if len(lr.shape) != 3 or lr.shape[2] != 3 or tuple(motion.shape) != tuple(lr.shape[:2]) + (2,):
             raise ValueError(f"expected colour (h, w, 3) and motion (h, w, 2), got {lr.shape} and {motion.shape}")

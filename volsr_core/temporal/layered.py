@@ -44,7 +44,7 @@ from volsr_core.render import layout
 from volsr_core.render.layout import SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA
 from volsr_core.temporal import stages
 from volsr_core.temporal.stages import CPU_STAGES
-from volsr_core.temporal.taau import TemporalUpsampler, _moves, checked_jitter, output_image
+from volsr_core.temporal.taau import TemporalUpsampler, _moves, checked_jitter, output_image, window_of
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
 _INNER = dict(fastmath=True, boundscheck=False)  # helpers of the kernels below: cached as part of them, not apart
@@ -340,3 +340,14 @@ class LayeredUpsampler(TemporalUpsampler):
         self._spare, self._spare_shown = (self.history, self._history_shown) if has else (None, None)
         self.history, self._history_shown = new_history, (shown, spans)
         return out
+
+    def background_window(self) -> tuple[int, int, int, int] | None:
+        """The HR window (top, bottom, left, right) outside which the last estimate is the background itself: the LR
+        columns where a slab's 3x3 neighbourhood shows something, per row (the prepass's ``content``), widened by one
+        LR pixel (the HR pixels a jittered sample is nearest to); (0, 0, 0, 0) where nothing shows; None before a
+        frame."""
+        if self._content is None:
+            return None
+        content = self._content
+        shown = np.stack([content[:, :, 0].min(axis=0), content[:, :, 1].max(axis=0)], axis=-1)
+        return window_of(shown, self.scale, self._info.shape[2], reach=1)

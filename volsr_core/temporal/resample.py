@@ -138,14 +138,18 @@ def _down_row(across, taps, weights, low, high, out):
 
 
 @numba.njit(parallel=True, cache=True)
-def _mix_rows(across, rows, row_w, low, high, out):
-    """Stage 2 over the rows of ``out`` (H, W, C): output row y from the rows ``rows[y]`` of ``across`` (h, W * C, the
-    input rows resampled along x) weighted by ``row_w[y]`` (:func:`_axis_taps` of the height), clamped to [``low``,
-    ``high``]; one thread team over the rows. Also the second pass of XS's filter and stretch in one
+def _mix_rows(across, rows, row_w, low, high, out, top=0, left=0):
+    """Stage 2: output row y (of ``rows``' count) from the rows ``rows[y]`` of ``across`` (h, w * C, the input rows
+    resampled along x) weighted by ``row_w[y]`` (:func:`_axis_taps` of the height), clamped to [``low``, ``high``],
+    into row ``top`` + y of ``out`` (H, W, C) from column ``left`` on (w columns; 0 and 0: all of ``out``); one
+    thread team over the rows. Also the second pass of XS's filter and stretch in one
     (:func:`~volsr_core.runtime.base_filter.filter_image` with ``stretch=2``), whose first writes ``across``."""
-    flat = out.reshape(out.shape[0], out.shape[1] * out.shape[2])
-    for y in numba.prange(out.shape[0]):
-        _down_row(across, rows[y], row_w[y], low, high, flat[y])
+    channels = out.shape[2]
+    flat = out.reshape(out.shape[0], out.shape[1] * channels)
+    start = left * channels
+    stop = start + across.shape[1]
+    for y in numba.prange(rows.shape[0]):
+        _down_row(across, rows[y], row_w[y], low, high, flat[top + y][start:stop])
 
 
 @numba.njit(parallel=True, cache=True)

@@ -94,10 +94,11 @@ def _one_colour(box, j, i):
 
 
 @numba.njit(**_INNER)
-def _prepass_row(j, lr, motion, scale, dis_motion, settled, box):
+def _prepass_row(j, lr, motion, scale, dis_motion, settled, background, box, shown):
     """LR row j: YCoCg min/max of each 3x3 neighbourhood (box[..., 0:6]) and the parallax flag (box[..., 6]); with
     ``settled`` (every pixel of the frame settles: :func:`_row`) the flag only where the box is not one colour, the
-    only pixels the kernel then reads it at (0 elsewhere; its nine vectors: half the prepass's time).
+    only pixels the kernel then reads it at (0 elsewhere; its nine vectors: half the prepass's time). ``shown[j]``:
+    the first and last column whose colour is not ``background`` (RGB), (w, -1) where none is.
 
     The box of column i is that of the column boxes of i - 1, i and i + 1 (edges repeated), kept as
     the row is walked: each pixel's colour is converted three times, not nine.
@@ -107,7 +108,10 @@ def _prepass_row(j, lr, motion, scale, dis_motion, settled, box):
     rows = (max(j - 1, 0), j, min(j + 1, h - 1))
     left = _column_box(lr, rows, 0)
     mid = left
+    first, last = w, -1
     for i in range(w):
+        if lr[j, i, 0] != background[0] or lr[j, i, 1] != background[1] or lr[j, i, 2] != background[2]:
+            first, last = min(first, i), i
         right = _column_box(lr, rows, min(i + 1, w - 1))
         box[j, i, 0] = min(min(left[0], mid[0]), right[0])
         box[j, i, 1] = min(min(left[1], mid[1]), right[1])
@@ -126,6 +130,7 @@ def _prepass_row(j, lr, motion, scale, dis_motion, settled, box):
                 xx = min(max(i + dx, 0), w - 1)
                 spread = max(spread, abs(motion[yy, xx, 0] - m0) + abs(motion[yy, xx, 1] - m1))
         box[j, i, 6] = 1.0 if scale * spread > dis_motion else 0.0
+    shown[j, 0], shown[j, 1] = first, last
 
 
 @numba.njit(**_NB)
@@ -286,10 +291,10 @@ def _kernels(sources: str):
     (:func:`~volsr_core.hashing.sources_sha256`), so that numba's disk cache compiles them anew when it changes."""
 
     @numba.njit(parallel=True, cache=True)
-    def prepass(lr, motion, scale, dis_motion, settled, box):
+    def prepass(lr, motion, scale, dis_motion, settled, background, box, shown):
         sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
         for j in numba.prange(lr.shape[0]):
-            _prepass_row(j, lr, motion, scale, dis_motion, settled, box)
+            _prepass_row(j, lr, motion, scale, dis_motion, settled, background, box, shown)
 
     @numba.njit(parallel=True, cache=True)
     def kernel(history, has_history, lr, motion, depth, box, cols, runs, scale, jy, inv2s2, tent, cap, disocclusion,
@@ -330,6 +335,19 @@ def _columns(hr_w: int, lr_w: int, scale: int, jx: float, inv2s2: float) -> tupl
             lx += 1
     runs[lx:] = hr_w  # samples no column is nearest to (the last ones), and the end
     return cols, runs
+
+
+def window_of(shown: np.ndarray, scale: int, lr_w: int, reach: int = 2) -> tuple[int, int, int, int]:
+    """The HR window (top, bottom, left, right) of an LR frame ``lr_w`` pixels wide at ``scale`` around the columns its
+    rows show (``shown`` (h, 2): per row the first and last, (w, -1) for none), widened by ``reach`` LR pixels each way
+    and clipped to the frame; (0, 0, 0, 0) where no row shows any."""
+    rows = np.flatnonzero(shown[:, 1] >= shown[:, 0])
+    if rows.size == 0:
+        return 0, 0, 0, 0
+    top, bottom = max(int(rows[0]) - reach, 0), min(int(rows[-1]) + 1 + reach, shown.shape[0])
+    left = max(int(shown[rows, 0].min()) - reach, 0)
+    right = min(int(shown[rows, 1].max()) + 1 + reach, lr_w)
+    return top * scale, bottom * scale, left * scale, right * scale
 
 
 def least_weight(cols: np.ndarray) -> float:
@@ -409,6 +427,10 @@ class TemporalUpsampler:
         self.side_outputs = bool(side_outputs)
         self.history: np.ndarray | None = None  # (H, W, 5): RGB, accumulated weight, depth
         self.last_aux: np.ndarray | None = None  # (H, W, 4) of the last frame with side_outputs: see __call__
+        # per LR row of the last frame, the first and last column not of the background colour it was given; None
+        # where none was given or the frame was static (see background_window)
+        self._shown: np.ndarray | None = None
+        self._shown_rows: np.ndarray | None = None  # the prepass's buffer for it
         self._spare: np.ndarray | None = None
         self._box: np.ndarray | None = None
         self._cols: dict = {}
@@ -416,6 +438,15 @@ class TemporalUpsampler:
     def reset(self) -> None:
         """Forget the history: the next frame gives its 2x2 splat estimate only."""
         self.history = None
+
+    def background_window(self) -> tuple[int, int, int, int] | None:
+        """The HR window (top, bottom, left, right; bottom and right exclusive) outside which the last estimate is one
+        colour, the background's as this TAAU writes it (step 5: a one-colour box's colour, through YCoCg and back);
+        (0, 0, 0, 0) where all of it is; None where that is not known: no frame yet, no ``background`` given with it,
+        or a static frame, whose unclamped blend of that colour with itself leaves float rounding. It is the LR
+        pixels not of the background colour, widened by one LR pixel (their 3x3 boxes) and by one more (the HR pixels
+        a jittered sample is nearest to reach one LR pixel past its own)."""
+        return None if self._shown is None else window_of(self._shown, self.scale, self._box.shape[1])
 
     def smoothing(self, pixels_per_voxel: float | None) -> float:
         """How far towards the smooth settings a rotating frame goes, in [0, 1], for an LR frame with
@@ -463,10 +494,11 @@ class TemporalUpsampler:
 
     def __call__(self, lr_color: np.ndarray, lr_motion: np.ndarray, jitter: tuple[float, float],
                  depth: np.ndarray | None = None, rotation: float | None = None,
-                 pixels_per_voxel: float | None = None, *, out: np.ndarray | None = None) -> np.ndarray:
+                 pixels_per_voxel: float | None = None, *, background=None,
+                 out: np.ndarray | None = None) -> np.ndarray:
         """Accumulate one LR frame; returns a new (h * scale, w * scale, 3) float32 image, or ``out`` (of that shape,
         C-contiguous) written with it: for a caller done with the last one (a new 1024² image costs about 1 ms of
-        page faults a frame).
+        page faults a frame). ``background``: the RGB the frame was composited over, for :meth:`background_window`.
 
         ``lr_color`` (h, w, 3); ``lr_motion`` (h, w, 2) in LR pixels; ``jitter`` (jx, jy) in
         [-0.5, 0.5); ``depth`` (h, w) the renderer's ``motion_depth`` (or ``depth``) buffer, None
@@ -507,10 +539,13 @@ class TemporalUpsampler:
         cols, runs = self._columns(w, jx, sigma)
         if self._box is None or self._box.shape[:2] != (h, w):
             self._box = np.empty((h, w, 8), dtype=np.float32)
+            self._shown_rows = np.empty((h, 2), dtype=np.int64)
         least_column = least_weight(cols)
         settled = not static and not self.side_outputs and \
             least_column * least_weight(self._columns(h, jy, sigma)[0]) > cap * SETTLING_MARGIN
-        _prepass(lr, motion, s, self.dis_motion, settled, self._box)
+        colour = np.full(3, np.nan, np.float32) if background is None else np.asarray(background, np.float32)[:3]
+        _prepass(lr, motion, s, self.dis_motion, settled, colour, self._box, self._shown_rows)
+        self._shown = None if background is None or static else self._shown_rows
         new_history = self._spare if self._spare is not None and self._spare.shape == shape else \
             np.empty(shape, dtype=np.float32)
         out = output_image(out, shape[:2])
