@@ -11,8 +11,9 @@ frame's pixels per voxel; ray starts jittered), then fed ``--passes`` times thro
 the current one (which goes first alternating from frame to frame) so that machine noise hits both alike;
 the table gives the median ms per call of each (the calls after the first two frames of a pass, which have a
 history), their ratio and the largest difference between their outputs. TAAU runs without its side outputs, as
-``volsr bench``'s TAAU and variant XS run it (``--side-outputs``: with them, as before 2026-12-02). ``--slabs K`` times the layered TAAU instead
-(``LayeredUpsampler``, ``volsr_core/temporal/layered.py``) on frames rendered in K depth slabs, as XS 4x runs.
+``volsr bench``'s TAAU and variant XS run it (``--side-outputs``: with them, as before 2026-12-02). ``--slabs K``
+times the layered TAAU instead (``LayeredUpsampler``, ``volsr_core/temporal/layered.py``) on frames rendered in K
+depth slabs, as XS 4x runs.
 ``--volume`` is a ``volsr bench`` volume spec (``../shared/data/volumes`` is searched for a bare file name) or
 ``phantom``.
 """

@@ -45,8 +45,9 @@ def time_side_by_side(pipeline: Pipeline, modules: list, cameras: list, passes: 
             upscaler.reset()
         previous = None
         for t, camera in enumerate(cameras):
-            frame = pipeline.caster.render(camera, width, height, jitter=halton_jitter(t, jitter_phases(pipeline.model_scale)),
-                                           previous_camera=previous, seed=t, slabs=pipeline.slabs)
+            jitter = halton_jitter(t, jitter_phases(pipeline.model_scale))
+            frame = pipeline.caster.render(camera, width, height, jitter=jitter, previous_camera=previous, seed=t,
+                                           slabs=pipeline.slabs)
             previous = camera
             images: dict[int, np.ndarray] = {}
             for k in (range(len(modules)) if t % 2 == 0 else reversed(range(len(modules)))):

@@ -12,8 +12,9 @@ result; where every tap of a pixel reads one colour (the background either side 
 frame's pixels) the sum is one constant per row end and channel, computed once. Told the window outside which the
 image is one colour (``filter_image(..., window=)``: the upscaler passes the one its TAAU reports), the kernels run on
 that window alone, read in place, and the rest of the output takes what the filter makes of that colour (the
-upscaler's step for XS 0.83-0.91 of its time at 1024², 0.89-1.03 at 512², ``benchmarks/bench_upscaler.py``). Work buffers stay in a
-:class:`Scratch` between frames. On TAAU's 512² estimates (2 cores, medians, ``benchmarks/bench_base_filter.py``):
+upscaler's step for XS 0.83-0.91 of its time at 1024², 0.89-1.03 at 512², ``benchmarks/bench_upscaler.py``). Work
+buffers stay in a :class:`Scratch` between frames. On TAAU's 512² estimates (2 cores, medians,
+``benchmarks/bench_base_filter.py``):
 1.6 ms for the 5x5 pair of XS 2x and for a 9x9 filter (XS 4x's until 2026-11-25, now 5x5: 1.1 ms;
 docs/network.md), where onnxruntime's depthwise Conv took 2.4 (5x5) and 10.8 ms (9x9), on a faster machine,
 without its transposes; the bands and the constant ends took 0.76-0.90 of the time of whole-image passes for one

@@ -89,7 +89,8 @@ def _column_box(lr, rows, i):
 
 @numba.njit(**_INNER)
 def _one_colour(box, j, i):
-    """Whether the 3x3 neighbourhood of LR pixel (j, i) is one colour: its YCoCg box (:func:`_prepass_row`) is a point."""
+    """Whether the 3x3 neighbourhood of LR pixel (j, i) is one colour: its YCoCg box (:func:`_prepass_row`) is a
+    point."""
     return box[j, i, 0] == box[j, i, 3] and box[j, i, 1] == box[j, i, 4] and box[j, i, 2] == box[j, i, 5]
 
 
@@ -354,8 +355,8 @@ def least_weight(cols: np.ndarray) -> float:
     """The least sum of an HR column's two Gaussian weights (``cols[:, 3] + cols[:, 4]`` of :func:`_columns`; of a row's
     where the columns are those of the rows, with the vertical jitter). A pixel's splat weight ``a`` is the product of
     its column's sum and its row's, so where the two least sums' product exceeds the history cap (by
-    :data:`SETTLING_MARGIN`) every pixel of the frame *settles*: a flat pixel's new weight ``min(n + a, cap)`` is the cap
-    whatever its history holds, which then is not fetched (with :attr:`TemporalUpsampler.side_outputs`, which report
+    :data:`SETTLING_MARGIN`) every pixel of the frame *settles*: a flat pixel's new weight ``min(n + a, cap)`` is the
+    cap whatever its history holds, which then is not fetched (with :attr:`TemporalUpsampler.side_outputs`, which report
     ``n``, it is). A rotating view's cap lies below the least ``a`` at 2x and often at 4x (0.52 at ``sigma`` 0.35,
     halfway between four samples; the cap at 2° a frame: 0.5 at 2x, 1 at 4x, a quarter of that sampled finely)."""
     return float((cols[:, 3] + cols[:, 4]).min())
