@@ -196,6 +196,7 @@ def _row(y, history, has_history, lr, motion, depth, box, cols, runs, scale, jy,
         gated = disocclusion > 0.0 and box[ly, lx, 6] > 0.5
         lo0, lo1, lo2, hi0, hi1, hi2 = box[ly, lx, 0], box[ly, lx, 1], box[ly, lx, 2], box[ly, lx, 3], box[ly, lx, 4], \
             box[ly, lx, 5]
+        # _one_colour's test on the bounds already loaded (re-reading the box took 1.03-1.10 times as long at 4x)
         flat = rectify and lo0 == hi0 and lo1 == hi1 and lo2 == hi2
         # along the run the history is fetched at one fraction past consecutive columns (x + floor(mx)): its weights
         # are the run's, found per pixel only where a fetch reaches the history's edge
