@@ -6,8 +6,8 @@ import pytest
 from test_taau import pattern, psnr
 
 from volsr_core.temporal import halton_jitter, jitter_phases
-from volsr_core.temporal.layered import _EMPTY, _INFO, LayeredUpsampler, _prepass
-from volsr_core.temporal.taau import TemporalUpsampler
+from volsr_core.temporal.layered import _EMPTY, _INFO, LayeredUpsampler, _kernel, _prepass
+from volsr_core.temporal.taau import TemporalUpsampler, _columns
 
 
 def layers(x: np.ndarray, y: np.ndarray, t: int, speed: float) -> list[tuple[np.ndarray, float]]:
@@ -78,6 +78,104 @@ def test_the_prepass_is_its_definition_ties_and_empty_slabs_included():
     np.testing.assert_array_equal(info[inside], reference[inside])
     _prepass(slabs, False, across, info, content)  # without the box (a frame that does not rectify): the rest alike
     np.testing.assert_array_equal(info[inside][:, 8:], reference[inside][:, 8:])
+
+
+def window_reference(n: int, scale: int, jitter: float, lr_n: int, inv2s2: float):
+    """Along one axis of ``n`` HR pixels: the nearest LR sample, the 2x2 window's two samples, the fraction past the
+    first and their Gaussian weights (module docstring, step 1; positions as docs/conventions.md gives them)."""
+    u = (np.arange(n) + 0.5) / scale - 0.5 - jitter
+    f = np.floor(u)
+    nearest = np.clip(np.floor(u + 0.5), 0, lr_n - 1).astype(int)
+    first, second = np.clip(f, 0, lr_n - 1).astype(int), np.clip(f + 1, 0, lr_n - 1).astype(int)
+    d = u - f
+    return nearest, first, second, d, np.exp(-d * d * inv2s2), np.exp(-(d - 1.0) ** 2 * inv2s2)
+
+
+def bilinear_fetch(image: np.ndarray, sy: float, sx: float) -> np.ndarray:
+    """``image`` (H, W, C) bilinear at (sy, sx), the position clamped into the pixel centres."""
+    h, w = image.shape[:2]
+    sy, sx = min(max(sy, 0.0), h - 1.0), min(max(sx, 0.0), w - 1.0)
+    iy, ix = min(int(sy), h - 2), min(int(sx), w - 2)
+    ty, tx = sy - iy, sx - ix
+    top = (1 - tx) * image[iy, ix] + tx * image[iy, ix + 1]
+    bottom = (1 - tx) * image[iy + 1, ix] + tx * image[iy + 1, ix + 1]
+    return (1 - ty) * top + ty * bottom
+
+
+def layered_reference(history, slabs, info, content, scale, jitter, sigma, tent, cap, rectify, background):
+    """One step of the layered TAAU by the module docstring, pixel by pixel: per slab the splat (Gaussian, blended
+    with the bilinear weights by ``tent``), the history fetched bilinearly where the nearest sample's vector points
+    (``info``'s, from the prepass), clamped into its box with ``rectify``, blended; empty where the nearest sample's
+    3x3 shows nothing; then the slabs composited front to back over ``background``. Returns (image, new history)."""
+    n_slabs, h, w = slabs.shape[:3]
+    big_h, big_w = h * scale, w * scale
+    inv2s2 = 1.0 / (2.0 * sigma * sigma)
+    ny, ry0, ry1, dy, gy0, gy1 = window_reference(big_h, scale, jitter[1], h, inv2s2)
+    nx, rx0, rx1, dx, gx0, gx1 = window_reference(big_w, scale, jitter[0], w, inv2s2)
+    image = np.empty((big_h, big_w, 3))
+    new_history = np.zeros((n_slabs, big_h, big_w, 5))
+    for y, x in np.ndindex(big_h, big_w):
+        ly, lx = ny[y], nx[x]
+        colour, behind = np.zeros(3), 1.0
+        for k in range(n_slabs):
+            if not content[k, ly, 0] <= lx <= content[k, ly, 1] or info[k, ly, lx, 10] == 0.0:
+                continue
+            weights = np.outer([gy0[y], gy1[y]], [gx0[x], gx1[x]])
+            a = weights.sum()
+            if tent > 0.0:
+                weights = (1.0 - tent) * weights / a + tent * np.outer([1 - dy[y], dy[y]], [1 - dx[x], dx[x]])
+            else:
+                weights = weights / a
+            taps = slabs[k][np.ix_([ry0[y], ry1[y]], [rx0[x], rx1[x]])][..., :4]
+            estimate = np.einsum("ij,ijc->c", weights, taps)
+            sy, sx = y + scale * info[k, ly, lx, 9], x + scale * info[k, ly, lx, 8]
+            n = 0.0
+            if -0.5 < sy < big_h - 0.5 and -0.5 < sx < big_w - 0.5:
+                past = bilinear_fetch(history[k], sy, sx)
+                n = min(past[4], cap)
+            if n > 0.0:
+                rgba = np.clip(past[:4], info[k, ly, lx, :4], info[k, ly, lx, 4:8]) if rectify else past[:4]
+                estimate = (n * rgba + a * estimate) / (n + a)
+            new_history[k, y, x, :4], new_history[k, y, x, 4] = estimate, min(n + a, cap)
+            colour, behind = colour + behind * estimate[:3], behind * (1.0 - estimate[3])
+        image[y, x] = colour + behind * np.asarray(background)
+    return image, new_history
+
+
+@pytest.mark.parametrize("tent, rectify", [(0.0, False), (0.0, True), (0.4, True)])
+def test_the_layered_step_is_its_definition(tent, rectify):
+    """The row kernel (splat by columns blended per row, history columns carried along a run, its clamped edges) gives
+    what the module docstring defines, pixel by pixel, with vectors that reach past every edge of the history; and it
+    empties the pixels a reused buffer held where the slab now shows nothing."""
+    rng = np.random.default_rng(7)
+    n_slabs, lr, scale, jitter, sigma, cap = 2, 10, 4, (0.3, -0.2), 0.3, 0.7
+    slabs = np.zeros((n_slabs, lr, lr, 6), np.float32)
+    alpha = rng.uniform(0.0, 1.0, (n_slabs, lr, lr)) * (rng.uniform(size=(n_slabs, lr, lr)) > 0.2)
+    alpha[1, 3:7, 2:8] = 0.0  # a hole in the back slab: empty where its 3x3 shows nothing
+    slabs[..., 3] = alpha
+    slabs[..., :3] = alpha[..., None] * rng.uniform(0.0, 1.0, (n_slabs, lr, lr, 3))
+    slabs[..., 4:6] = rng.uniform(-2.5, 2.5, (n_slabs, lr, lr, 2))  # LR px: up to 10 HR px, past the edges
+    big = lr * scale
+    history = rng.uniform(0.0, 1.0, (n_slabs, big, big, 5)).astype(np.float32)
+    history[..., 4] *= 2.0 * (rng.uniform(size=(n_slabs, big, big)) > 0.3)  # weights, some zero
+    info, across = np.empty((n_slabs, lr, lr, _INFO), np.float32), np.empty((n_slabs, lr, lr, _INFO), np.float32)
+    content = np.empty((n_slabs, lr, 2), np.int64)
+    _prepass(slabs, rectify, across, info, content)
+    background = np.array([0.2, 0.4, 0.6], np.float32)
+    cols, runs = _columns(big, lr, scale, jitter[0], 1.0 / (2.0 * sigma * sigma))
+    out = np.empty((big, big, 3), np.float32)
+    stale = rng.uniform(0.0, 1.0, (n_slabs, big, big, 5)).astype(np.float32)  # a reused buffer, shown everywhere
+    new_history, shown = stale.copy(), np.ones((n_slabs, big, big), np.uint8)
+    spans = np.tile(np.array([0, big], np.int64), (n_slabs, big, 1))
+    _kernel(history, True, slabs, info, content, cols, runs, scale, jitter[1], 1.0 / (2.0 * sigma * sigma), tent,
+            cap, rectify, background, out, new_history, shown, spans)
+    image, reference = layered_reference(history, slabs, info, content, scale, jitter, sigma, tent, cap, rectify,
+                                         background)
+    empty = reference[..., 4] == 0.0
+    assert empty[1].mean() > 0.05 and not empty.all()
+    np.testing.assert_allclose(new_history, reference, rtol=1e-5, atol=2e-6)
+    np.testing.assert_allclose(out, image, rtol=1e-5, atol=2e-6)
+    np.testing.assert_array_equal(shown, ~empty)
 
 
 def test_layers_moving_apart_keep_their_history_where_one_vector_per_pixel_loses_it():

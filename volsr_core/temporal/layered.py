@@ -43,7 +43,7 @@ from volsr_core.hashing import sources_sha256
 from volsr_core.render import layout
 from volsr_core.render.layout import SLAB_CHANNELS, SLAB_MOTION, SLAB_RGBA
 from volsr_core.temporal import stages
-from volsr_core.temporal.stages import CPU_STAGES
+from volsr_core.temporal.stages import CPU_STAGES, SPLAT_FLOOR
 from volsr_core.temporal.taau import TemporalUpsampler, _moves, checked_jitter, output_image, window_of
 
 _NB = dict(fastmath=True, boundscheck=False, cache=True)
@@ -101,14 +101,27 @@ def _widen(src, lo_at, hi_at, alpha_at, motion_at, vertical, box, shows, rows, d
 
 
 @numba.njit(**_INNER)
+def _history_column(history, k, iy, iy1, x, uy, ty):
+    """Column ``x`` of slab ``k``'s (K, H, W, 5) history blended between rows ``iy`` and ``iy1`` by (``uy``, ``ty``):
+    the vertical half of a bilinear fetch, all five channels."""
+    return (uy * history[k, iy, x, 0] + ty * history[k, iy1, x, 0],
+            uy * history[k, iy, x, 1] + ty * history[k, iy1, x, 1],
+            uy * history[k, iy, x, 2] + ty * history[k, iy1, x, 2],
+            uy * history[k, iy, x, 3] + ty * history[k, iy1, x, 3],
+            uy * history[k, iy, x, 4] + ty * history[k, iy1, x, 4])
+
+
+@numba.njit(**_INNER)
 def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, inv2s2, tent, cap, rectify, background,
-         out, new_history, shown, spans, acc):
+         out, new_history, shown, spans, acc, splat_rows):
     n_slabs, hr_h, hr_w = new_history.shape[0], new_history.shape[1], new_history.shape[2]
-    lr_h = slabs.shape[1]
+    lr_h, lr_w = slabs.shape[1], slabs.shape[2]
     ly, y0, y1, dy0, wy0, wy1 = _row_window(y, scale, jy, lr_h, inv2s2)
     # the per-pixel sums in float32, as the buffers are: float64 weights converted every load (the kernel now takes
     # 0.84-0.88 of the time it took with them; benchmarks/bench_taau.py --slabs 2, 512² and 1024²)
     zero, one, cap32 = np.float32(0.0), np.float32(1.0), np.float32(cap)
+    gy0, gy1, by0, by1 = np.float32(wy0), np.float32(wy1), np.float32(1.0 - dy0), np.float32(dy0)
+    row_weight = wy0 + wy1
     # the HR columns where some slab shows something (``content``: per slab and LR row, the first and last LR
     # column that does); the rest of the row is the background
     drawn_lo, drawn_hi = hr_w, 0
@@ -120,6 +133,16 @@ def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, i
         for c in range(4):
             acc[x, c] = 0.0  # the composite so far: premultiplied RGB and alpha
     for k in range(n_slabs):
+        # the splat's vertical half, once per LR column for the HR row (``splat_rows``: the two LR rows' RGBA weighted
+        # by the Gaussian, 0-3, and by the bilinear weights, 4-7, where ``tent`` blends them in): each HR pixel then
+        # weighs its window's two columns, half the reads of the whole 2x2 window
+        if content[k, ly, 1] >= content[k, ly, 0]:
+            for lx in range(max(content[k, ly, 0] - 1, 0), min(content[k, ly, 1] + 2, lr_w)):
+                for c in range(4):
+                    top, bottom = slabs[k, y0, lx, c], slabs[k, y1, lx, c]
+                    splat_rows[lx, c] = gy0 * top + gy1 * bottom
+                    if tent > 0.0:
+                        splat_rows[lx, 4 + c] = by0 * top + by1 * bottom
         # the LR columns to visit: those where the slab shows something and those whose HR pixels the buffer may
         # still hold something other than zeros in (``spans``: per slab and HR row, as the buffer was last written)
         first, last = content[k, ly, 0], content[k, ly, 1]
@@ -147,25 +170,52 @@ def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, i
             iy1 = min(iy + 1, hr_h - 1)
             ty = np.float32(sy - iy)
             uy = one - ty
-            # along the run the history is fetched at one fraction past consecutive columns (x + floor(mx)), so its
-            # bilinear weights are the run's; only where a fetch reaches the history's edge is it clamped per pixel
+            # along the run the history is fetched at one fraction past consecutive columns (x + floor(mx)), so each
+            # pixel's right column, blended between the two rows, is the next pixel's left one; only where a fetch
+            # reaches the history's edge, at either end of the run, is it clamped per pixel
             shift = int(math.floor(mx))
             tx = np.float32(mx - shift)
             ux = one - tx
-            r00, r01, r10, r11 = ux * uy, tx * uy, ux * ty, tx * ty
+            carried = False  # whether (q0 .. q4) holds history column x + shift, blended between the rows
+            q0 = q1 = q2 = q3 = q4 = zero
             for x in range(runs[lx], runs[lx + 1]):
                 x0 = int(cols[x, 1])
                 x1 = int(cols[x, 2])
-                v00, v01, v10, v11, va, vinv = _splat_weights(wy0, wy1, cols[x, 3], cols[x, 4], dy0, cols[x, 5], tent)
-                w00, w01, w10, w11 = np.float32(v00), np.float32(v01), np.float32(v10), np.float32(v11)
-                a, inv = np.float32(va), np.float32(vinv)
+                gx0, gx1, fx = cols[x, 3], cols[x, 4], cols[x, 5]
+                va = row_weight * (gx0 + gx1)
+                if va < SPLAT_FLOOR:  # the nearest sample alone (:func:`~volsr_core.temporal.stages.splat_weights`)
+                    v00, v01, v10, v11, va, vinv = _splat_weights(wy0, wy1, gx0, gx1, dy0, fx, tent)
+                    w00, w01, w10, w11, inv = (np.float32(v00), np.float32(v01), np.float32(v10), np.float32(v11),
+                                               np.float32(vinv))
+                    e0 = _taps(slabs, k, y0, y1, x0, x1, 0, w00, w01, w10, w11) * inv
+                    e1 = _taps(slabs, k, y0, y1, x0, x1, 1, w00, w01, w10, w11) * inv
+                    e2 = _taps(slabs, k, y0, y1, x0, x1, 2, w00, w01, w10, w11) * inv
+                    e3 = _taps(slabs, k, y0, y1, x0, x1, 3, w00, w01, w10, w11) * inv
+                else:  # the Gaussian, normalised, blended with the bilinear weights by ``tent``
+                    keep = np.float32((1.0 - tent) / va)
+                    c0, c1 = np.float32(gx0) * keep, np.float32(gx1) * keep
+                    e0 = c0 * splat_rows[x0, 0] + c1 * splat_rows[x1, 0]
+                    e1 = c0 * splat_rows[x0, 1] + c1 * splat_rows[x1, 1]
+                    e2 = c0 * splat_rows[x0, 2] + c1 * splat_rows[x1, 2]
+                    e3 = c0 * splat_rows[x0, 3] + c1 * splat_rows[x1, 3]
+                    if tent > 0.0:
+                        t0, t1 = np.float32(tent * (1.0 - fx)), np.float32(tent * fx)
+                        e0 += t0 * splat_rows[x0, 4] + t1 * splat_rows[x1, 4]
+                        e1 += t0 * splat_rows[x0, 5] + t1 * splat_rows[x1, 5]
+                        e2 += t0 * splat_rows[x0, 6] + t1 * splat_rows[x1, 6]
+                        e3 += t0 * splat_rows[x0, 7] + t1 * splat_rows[x1, 7]
+                a = np.float32(va)
                 n = zero
-                b00 = b01 = b10 = b11 = zero
-                ix, ix1 = x + shift, 0
+                h0 = h1 = h2 = h3 = zero
+                ix = x + shift
                 if rows_in and 0 <= ix < hr_w - 1:
-                    ix1 = ix + 1
-                    b00, b01, b10, b11 = r00, r01, r10, r11
-                    n = min(_taps(history, k, iy, iy1, ix, ix1, 4, b00, b01, b10, b11), cap32)
+                    if not carried:
+                        q0, q1, q2, q3, q4 = _history_column(history, k, iy, iy1, ix, uy, ty)
+                    p0, p1, p2, p3, p4 = _history_column(history, k, iy, iy1, ix + 1, uy, ty)
+                    n = min(ux * q4 + tx * p4, cap32)
+                    h0, h1, h2, h3 = ux * q0 + tx * p0, ux * q1 + tx * p1, ux * q2 + tx * p2, ux * q3 + tx * p3
+                    q0, q1, q2, q3, q4 = p0, p1, p2, p3, p4
+                    carried = True
                 elif rows_in and -0.5 < x + mx < hr_w - 0.5:
                     sx = min(max(x + mx, 0.0), hr_w - 1.0)
                     ix = min(int(sx), hr_w - 2) if hr_w > 1 else 0
@@ -173,18 +223,27 @@ def _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, i
                     ex = np.float32(sx - ix)
                     b00, b01, b10, b11 = (one - ex) * uy, ex * uy, (one - ex) * ty, ex * ty
                     n = min(_taps(history, k, iy, iy1, ix, ix1, 4, b00, b01, b10, b11), cap32)
-                share = one / (n + a)
+                    h0 = _taps(history, k, iy, iy1, ix, ix1, 0, b00, b01, b10, b11)
+                    h1 = _taps(history, k, iy, iy1, ix, ix1, 1, b00, b01, b10, b11)
+                    h2 = _taps(history, k, iy, iy1, ix, ix1, 2, b00, b01, b10, b11)
+                    h3 = _taps(history, k, iy, iy1, ix, ix1, 3, b00, b01, b10, b11)
+                if n > zero:
+                    if rectify:
+                        h0 = min(max(h0, info[k, ly, lx, 0]), info[k, ly, lx, 4])
+                        h1 = min(max(h1, info[k, ly, lx, 1]), info[k, ly, lx, 5])
+                        h2 = min(max(h2, info[k, ly, lx, 2]), info[k, ly, lx, 6])
+                        h3 = min(max(h3, info[k, ly, lx, 3]), info[k, ly, lx, 7])
+                    share = one / (n + a)
+                    e0, e1 = (n * h0 + a * e0) * share, (n * h1 + a * e1) * share
+                    e2, e3 = (n * h2 + a * e2) * share, (n * h3 + a * e3) * share
                 behind = one - acc[x, 3]
-                for c in range(4):
-                    o = _taps(slabs, k, y0, y1, x0, x1, c, w00, w01, w10, w11) * inv
-                    if n > zero:
-                        past = _taps(history, k, iy, iy1, ix, ix1, c, b00, b01, b10, b11)
-                        if rectify:
-                            past = min(max(past, info[k, ly, lx, c]), info[k, ly, lx, 4 + c])
-                        o = (n * past + a * o) * share
-                    new_history[k, y, x, c] = o
-                    acc[x, c] += behind * o
+                new_history[k, y, x, 0], new_history[k, y, x, 1] = e0, e1
+                new_history[k, y, x, 2], new_history[k, y, x, 3] = e2, e3
                 new_history[k, y, x, 4] = min(n + a, cap32)
+                acc[x, 0] += behind * e0
+                acc[x, 1] += behind * e1
+                acc[x, 2] += behind * e2
+                acc[x, 3] += behind * e3
                 shown[k, y, x] = 1
         spans[k, y, 0], spans[k, y, 1] = (new_lo, new_hi) if new_hi > new_lo else (0, 0)
     b0, b1, b2 = background[0], background[1], background[2]
@@ -250,8 +309,9 @@ def _row_kernel(sources: str):
         sources  # noqa: B018 - it keys numba's disk cache on the stage module (hashing.sources_sha256)
         for y in numba.prange(out.shape[0]):
             acc = np.empty((out.shape[1], 4), dtype=np.float32)
+            splat_rows = np.empty((slabs.shape[2], 8), dtype=np.float32)
             _row(y, history, has_history, slabs, info, content, cols, runs, scale, jy, inv2s2, tent, cap, rectify,
-                 background, out, new_history, shown, spans, acc)
+                 background, out, new_history, shown, spans, acc, splat_rows)
 
     return kernel
 
