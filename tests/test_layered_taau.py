@@ -6,6 +6,7 @@ import pytest
 from test_taau import pattern, psnr
 
 from volsr_core.temporal import halton_jitter, jitter_phases
+from volsr_core.temporal.color import fetch_bilinear, on_screen
 from volsr_core.temporal.layered import _EMPTY, _INFO, LayeredUpsampler, _kernel, _prepass
 from volsr_core.temporal.stages import SPLAT_FLOOR
 from volsr_core.temporal.taau import TemporalUpsampler, _columns
@@ -92,17 +93,6 @@ def window_reference(n: int, scale: int, jitter: float, lr_n: int, inv2s2: float
     return nearest, first, second, d, np.exp(-d * d * inv2s2), np.exp(-(d - 1.0) ** 2 * inv2s2)
 
 
-def bilinear_fetch(image: np.ndarray, sy: float, sx: float) -> np.ndarray:
-    """``image`` (H, W, C) bilinear at (sy, sx), the position clamped into the pixel centres."""
-    h, w = image.shape[:2]
-    sy, sx = min(max(sy, 0.0), h - 1.0), min(max(sx, 0.0), w - 1.0)
-    iy, ix = min(int(sy), h - 2), min(int(sx), w - 2)
-    ty, tx = sy - iy, sx - ix
-    top = (1 - tx) * image[iy, ix] + tx * image[iy, ix + 1]
-    bottom = (1 - tx) * image[iy + 1, ix] + tx * image[iy + 1, ix + 1]
-    return (1 - ty) * top + ty * bottom
-
-
 def layered_reference(history, slabs, info, content, scale, jitter, sigma, tent, cap, rectify, background):
     """One step of the layered TAAU by the module docstring, pixel by pixel: per slab the splat (Gaussian, blended
     with the bilinear weights by ``tent``), the history fetched bilinearly where the nearest sample's vector points
@@ -133,9 +123,9 @@ def layered_reference(history, slabs, info, content, scale, jitter, sigma, tent,
             taps = slabs[k][np.ix_([ry0[y], ry1[y]], [rx0[x], rx1[x]])][..., :4]
             estimate = np.einsum("ij,ijc->c", weights, taps)
             sy, sx = y + scale * info[k, ly, lx, 9], x + scale * info[k, ly, lx, 8]
-            n = 0.0
-            if -0.5 < sy < big_h - 0.5 and -0.5 < sx < big_w - 0.5:
-                past = bilinear_fetch(history[k], sy, sx)
+            n, past = 0.0, np.zeros(5)
+            if on_screen(sx, sy, big_w, big_h):
+                fetch_bilinear(history[k], sx, sy, past)
                 n = min(past[4], cap)
             if n > 0.0:
                 rgba = np.clip(past[:4], info[k, ly, lx, :4], info[k, ly, lx, 4:8]) if rectify else past[:4]
