@@ -94,6 +94,26 @@ def test_slabs_leave_the_frames_features_as_they_are_and_its_colour_within_what_
     np.testing.assert_array_equal(layered.data[~terminated], plain.data[~terminated])
 
 
+
+def test_a_front_slab_opaque_by_itself_leaves_the_features_as_they_are():
+    """Where the front slab turns opaque on its own, the ray jumps to the slab behind, whose first sample (here more
+    opaque than any in front) it takes at the full step: a render without slabs ends the ray in front and never sees
+    that sample, and nor do the features."""
+    array = np.zeros((40, 40, 40), dtype=np.float32)
+    array[2:20, 5:35, 5:35], array[20:38, 5:35, 5:35] = 500.0, 800.0  # a dense front block, a denser one behind
+    volume = Volume(array, spacing=(1.0, 1.0, 1.0))
+    tf = TransferFunction(color=[[0, 0, 0, 0], [500, 0.1, 0.3, 1.0], [800, 1.0, 0.2, 0.1]],
+                          scalar_opacity=[[0, 0.0], [400, 0.0], [500, 0.6], [800, 0.95]])
+    caster = RayCaster(volume, tf, start_jitter="ign")
+    camera = Camera.framing(volume.bounds, direction=(0.05, 0.1, 1.0), view_up=(0, 1, 0)).zoom(1.3)
+    kwargs = dict(jitter=(0.2, -0.3), previous_camera=camera.azimuth(3), seed=1)
+    plain, layered = caster.render(camera, 20, 20, **kwargs), caster.render(camera, 20, 20, slabs=2, **kwargs)
+    front_opaque = layered.slabs[0, ..., 3] >= 0.99
+    assert front_opaque.mean() > 0.3, "the front slab must turn opaque on its own, or the test shows nothing"
+    assert (layered.slabs[1, ..., 3][front_opaque] > 0.5).mean() > 0.8, "the slab behind must hold the block behind"
+    features = [c for c in range(plain.data.shape[2]) if c not in (0, 1, 2, 3)]
+    np.testing.assert_array_equal(layered.data[..., features], plain.data[..., features])
+
 def test_bad_slab_counts_are_rejected():
     caster = RayCaster(plates(True, True), shaded_tf())
     camera = Camera.framing(plates(True, True).bounds)

@@ -489,7 +489,9 @@ def build_ray_program(jit: Callable, features: bool = True) -> Callable:
                     a = 1.0 - (1.0 - a) ** stride
                 ca_before = ca
                 cr, cg, cb, ca = composite(r, g, b, a, cr, cg, cb, ca)
-                if features and stride == 1:  # the features see the samples a render without slabs sees
+                # the features see the samples a render without slabs sees: it ends the ray where ca reaches ert, which
+                # a ray in slabs passes (at the hidden stride, or after a jump at the full step to its next sample)
+                if features and ca_before < ert:
                     mr, mg, mb, ma, t_max = track_max_alpha(r, g, b, a, t, mr, mg, mb, ma, t_max)
                     t_cross, sum_w, sum_wt = track_motion_point(t, ca_before, ca, t_cross, sum_w, sum_wt, threshold)
                 if n_slabs > 0:
