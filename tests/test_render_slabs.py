@@ -94,7 +94,6 @@ def test_slabs_leave_the_frames_features_as_they_are_and_its_colour_within_what_
     np.testing.assert_array_equal(layered.data[~terminated], plain.data[~terminated])
 
 
-
 def test_a_front_slab_opaque_by_itself_leaves_the_features_as_they_are():
     """Where the front slab turns opaque on its own, the ray jumps to the slab behind, whose first sample (here more
     opaque than any in front) it takes at the full step: a render without slabs ends the ray in front and never sees
@@ -113,6 +112,7 @@ def test_a_front_slab_opaque_by_itself_leaves_the_features_as_they_are():
     assert (layered.slabs[1, ..., 3][front_opaque] > 0.5).mean() > 0.8, "the slab behind must hold the block behind"
     features = [c for c in range(plain.data.shape[2]) if c not in (0, 1, 2, 3)]
     np.testing.assert_array_equal(layered.data[..., features], plain.data[..., features])
+
 
 def test_bad_slab_counts_are_rejected():
     caster = RayCaster(plates(True, True), shaded_tf())
