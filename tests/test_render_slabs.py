@@ -6,7 +6,10 @@ import pytest
 from test_render_reference import oblique_volume, shaded_tf
 
 from volsr_core.render import RayCaster
+from volsr_core.render.layout import OUT_CHANNELS, OUT_DEPTH
 from volsr_core.scene import Camera, TransferFunction, Volume
+
+FEATURES = slice(OUT_DEPTH, OUT_CHANNELS)  # a frame's channels after its colour and alpha
 
 
 def composite(slabs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -88,8 +91,7 @@ def test_slabs_leave_the_frames_features_as_they_are_and_its_colour_within_what_
     terminated = plain.alpha >= 0.8
     assert terminated.mean() > 0.03, "the front must end rays, or the test shows nothing"
     assert (layered.slabs[1:, ..., 3][:, terminated] > 1e-3).any(), "the slabs behind must hold something"
-    features = [c for c in range(plain.data.shape[2]) if c not in (0, 1, 2, 3)]
-    np.testing.assert_array_equal(layered.data[..., features], plain.data[..., features])
+    np.testing.assert_array_equal(layered.data[..., FEATURES], plain.data[..., FEATURES])
     assert np.abs(layered.data[..., :4] - plain.data[..., :4]).max() <= 0.2 + 1e-6
     np.testing.assert_array_equal(layered.data[~terminated], plain.data[~terminated])
 
@@ -110,8 +112,7 @@ def test_a_front_slab_opaque_by_itself_leaves_the_features_as_they_are():
     front_opaque = layered.slabs[0, ..., 3] >= 0.99
     assert front_opaque.mean() > 0.3, "the front slab must turn opaque on its own, or the test shows nothing"
     assert (layered.slabs[1, ..., 3][front_opaque] > 0.5).mean() > 0.8, "the slab behind must hold the block behind"
-    features = [c for c in range(plain.data.shape[2]) if c not in (0, 1, 2, 3)]
-    np.testing.assert_array_equal(layered.data[..., features], plain.data[..., features])
+    np.testing.assert_array_equal(layered.data[..., FEATURES], plain.data[..., FEATURES])
 
 
 def test_bad_slab_counts_are_rejected():
