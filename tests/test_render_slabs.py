@@ -7,6 +7,7 @@ from test_render_reference import oblique_volume, shaded_tf
 
 from volsr_core.render import RayCaster
 from volsr_core.render.layout import OUT_CHANNELS, OUT_DEPTH
+from volsr_core.render.slabs import behind_front_share, composited
 from volsr_core.scene import Camera, TransferFunction, Volume
 
 FEATURES = slice(OUT_DEPTH, OUT_CHANNELS)  # a frame's channels after its colour and alpha
@@ -49,6 +50,46 @@ def test_one_slab_moves_with_the_opacity_weighted_mean_point():
     assert shown.mean() > 0.3
     np.testing.assert_allclose(frame.slabs[0, ..., 4:6][shown], frame.motion[shown], atol=1e-4)
     assert np.all(frame.slabs[0, ..., 4:6][~(frame.slabs[0, ..., 3] > 0)] == 0.0)
+
+
+def test_slabs_composited_into_one_give_the_frames_alpha_and_their_seen_motion():
+    """:func:`~volsr_core.render.slabs.composited` of a render in three slabs: the frame's alpha and premultiplied
+    colour; on made-up slabs, the motion weighted by what each slab adds to the composite's alpha, 0 where none shows."""
+    volume = oblique_volume()
+    camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1)).zoom(1.5)
+    frame = RayCaster(volume, shaded_tf(), background=(0.2, 0.3, 0.4)).render(camera, 24, 20, slabs=3)
+    one = composited(frame.slabs)
+    assert one.shape == (1, 20, 24, 6) and one.dtype == np.float32 and frame.alpha.max() > 0.5
+    np.testing.assert_allclose(one[0, ..., 3], frame.alpha, atol=1e-5)
+    np.testing.assert_allclose(one[0, ..., :3] + (1.0 - one[0, ..., 3:4]) * (0.2, 0.3, 0.4), frame.color, atol=1e-5)
+    slabs = np.zeros((2, 1, 3, 6), dtype=np.float32)
+    slabs[0, 0, 0] = (0.1, 0.1, 0.1, 0.5, 1.0, 0.0)  # half opaque in front, moving right ...
+    slabs[1, 0, 0] = (0.4, 0.4, 0.4, 1.0, 0.0, 2.0)  # ... an opaque back moving down, half of it seen
+    slabs[1, 0, 1] = (0.3, 0.3, 0.3, 0.6, -1.0, 1.0)  # the back alone
+    one = composited(slabs)[0, 0]
+    np.testing.assert_allclose(one[0], (0.3, 0.3, 0.3, 1.0, 0.5, 1.0), atol=1e-6)
+    np.testing.assert_allclose(one[1], slabs[1, 0, 1], atol=1e-6)
+    assert np.all(one[2] == 0.0)
+
+
+def test_the_share_behind_the_front_slab_is_what_the_back_adds_to_the_composites_alpha():
+    """:func:`~volsr_core.render.slabs.behind_front_share`: analytic on made-up slabs, 0 for one slab or nothing
+    shown; on two plates, near 0 with the back plate hidden behind an opaque front, and a good part with two alike
+    faint ones (the back plate, further away, covers fewer pixels)."""
+    slabs = np.zeros((2, 2, 2, 6), dtype=np.float32)
+    slabs[0, ..., 3], slabs[1, ..., 3] = 0.5, 1.0  # each pixel: 0.5 in front, 0.5 more behind
+    assert behind_front_share(slabs) == pytest.approx(0.5)
+    slabs[0, 0, 0, 3] = 1.0  # one pixel opaque in front: the back adds 1.5 of 3.5
+    assert behind_front_share(slabs) == pytest.approx(1.5 / 4.0)
+    assert behind_front_share(slabs[:1]) == 0.0 and behind_front_share(np.zeros_like(slabs)) == 0.0
+    camera = Camera.framing(plates(True, True).bounds, direction=(0.05, 0.1, 1.0), view_up=(0, 1, 0)).zoom(1.3)
+    white = [[0.0, 1.0, 1.0, 1.0], [500.0, 1.0, 1.0, 1.0]]
+    opaque_front = TransferFunction(color=white, scalar_opacity=[[250.0, 0.0], [300.0, 0.3], [500.0, 1.0]])
+    alike = TransferFunction(color=white, scalar_opacity=[[250.0, 0.0], [300.0, 0.1], [500.0, 0.1]])
+    hidden = RayCaster(plates(True, True), opaque_front).render(camera, 16, 16, slabs=2).slabs
+    both = RayCaster(plates(True, True), alike).render(camera, 16, 16, slabs=2).slabs
+    assert (hidden[1, ..., 3] > 0.1).mean() > 0.2, "the back plate is in the back slab, hidden or not"
+    assert behind_front_share(hidden) < 0.05 < 0.2 < behind_front_share(both) < 0.5  # measured: 0.0 and 0.26
 
 
 def plates(front: bool, back: bool) -> Volume:

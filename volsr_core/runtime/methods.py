@@ -247,15 +247,19 @@ class VolSR(Method):
 
     @property
     def slabs(self) -> int:
-        """The depth slabs the pipeline renders (0: none, the TAAU on the frame's colour; a frame-budget renderer,
-        whose levels differ, has none of its own)."""
+        """The depth slabs the pipeline rendered its last frame in (0: none, the TAAU on the frame's colour; a
+        frame-budget renderer, whose levels differ, has none of its own)."""
         return getattr(self.pipeline, "slabs", 0)
 
     @property
     def label(self) -> str:
-        """'VolSR XS 4x in 2 slabs'; a stretched pipeline names its model's scale and the stretch: 'VolSR XS 2x +
+        """'VolSR XS 4x in 2 slabs', 'VolSR XS 4x in 1 or 2 slabs' where the pipeline chooses them by look
+        (``Pipeline.slabs_by_look``); a stretched pipeline names its model's scale and the stretch: 'VolSR XS 2x +
         bicubic 2x' is a 4x point."""
-        slabs = f" in {self.slabs} slabs" if self.slabs else ""
+        if getattr(self.pipeline, "slabs_by_look", False):
+            slabs = f" in 1 or {self.pipeline.upscaler.slabs} slabs"
+        else:
+            slabs = f" in {self.slabs} slabs" if self.slabs else ""
         stretch = f" + bicubic {self.stretch}x" if self.stretch > 1 else ""
         return f"VolSR {self.variant} {self.scale // self.stretch}x{slabs}{stretch}"
 

@@ -7,6 +7,7 @@ Halton jitter offset and motion vectors against the previous camera, and upscale
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import statistics
@@ -18,6 +19,7 @@ import numpy as np
 
 from volsr_core.render.device import ready_at, to_host
 from volsr_core.render.raycaster import RayCaster
+from volsr_core.render.slabs import behind_front_share, composited
 from volsr_core.runtime.engines import open_engine
 from volsr_core.runtime.upscaler import StatefulUpscaler
 from volsr_core.scene.camera import Camera
@@ -32,6 +34,10 @@ STRETCH_FROM = 2.0  # stretch "auto": by 2 where a voxel spans at least this man
 # pixels per voxel (from about 2.3° at 512² on the bench's volumes, 4.7° at 256²), back below 2.5 (docs/performance.md)
 FAST_TURN = (2.5, 3.5)
 TURN_FRAMES = 3  # ... taken as the median of the last this many frames
+# depth slabs by look (``slabs`` None, a base-filter model on slabs, on the CPU): the model's two slabs where those
+# behind the front add at least this share of a new history's first frame's opacity, else one (docs/performance.md,
+# "Depth slabs by look"): on an opaque look the back slab is mostly hidden and two cost more than they separate
+SLAB_SHARE = 0.2
 
 
 class KeepsLastFrame:
@@ -83,7 +89,11 @@ class Pipeline(KeepsLastFrame):
       history per slab (docs/temporal.md, "Layered history"); only for a base-filter model on TAAU (XS) or a
       network trained on the layered TAAU (``taau_slabs``); 0 runs the TAAU on the frame's colour; None (the
       default) the model's own (:func:`~volsr_core.runtime.upscaler.default_slabs`: those it was trained on, two for
-      the shipped XS 4x and U-Nets, else two for XS at 4x and more, else 0).
+      the shipped XS 4x and U-Nets, else two for XS at 4x and more, else 0), and for a base-filter model (XS) on the
+      CPU by look: judged at each new history (as stretch "auto" judges), on its first frame rendered in the
+      model's slabs, the model's count where the slabs behind the front add at least :data:`SLAB_SHARE` of the frame's
+      opacity (:func:`~volsr_core.render.slabs.behind_front_share`), else one slab (that frame's slabs composited into
+      one): :attr:`slabs` is the count of the last frame, :attr:`slabs_by_look` says whether it is chosen so.
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
     rendering and upscaling that frame (``render_ms``, ``network_ms`` with the stretch, ``total_ms``: on the GPU
@@ -112,6 +122,9 @@ class Pipeline(KeepsLastFrame):
             self._paths[k] = (engine, StatefulUpscaler(engine, max_turn=max_turn, max_zoom=max_zoom, slabs=slabs,
                                                        device=device, stretch=k))
         self.auto_stretch = len(self._paths) > 1
+        self._by_look = {k: slabs is None and upscaler.base_filter is not None and upscaler.slabs > 1
+                         and not upscaler.on_device for k, (_, upscaler) in self._paths.items()}
+        self._look_slabs: int | None = None  # slabs by look: the count chosen for the current history
         self.max_turn = float(max_turn)  # a turn beyond it is a cut: stretch "auto" starts its choice afresh too
         self._fine = self._fast = False  # stretch "auto": the view samples the volume finely; it turns fast
         self._turns: deque[float] = deque(maxlen=TURN_FRAMES)  # ... the last frames' turns times pixels per voxel
@@ -127,18 +140,20 @@ class Pipeline(KeepsLastFrame):
         self.engine, self.upscaler = self._paths[stretch]
         if getattr(self, "stretch", stretch) != stretch:  # back to a history last used for other frames
             self.upscaler.reset("stretch changed")
+            self._look_slabs = None
         self.stretch = stretch
         self.model_scale = int(self.engine.config.scale)
         self.scale = self.model_scale * stretch
         self.slabs = self.upscaler.slabs
+        self.slabs_by_look = self._by_look[stretch]
 
-    def _auto_stretch(self, camera: Camera) -> int:
-        """Stretch "auto"'s choice for the frame of ``camera``: 2 where the view samples the volume finely (judged when
-        a history starts, or at a turn beyond ``max_turn``: a cut) or turns fast for its sampling (with hysteresis,
-        over the last frames' turns times their pixels per voxel), else 1."""
-        turn = view_rotation(camera, self.previous_camera)
+    def _auto_stretch(self, camera: Camera, turn: float, starts: bool) -> int:
+        """Stretch "auto"'s choice for the frame of ``camera``, which turned ``turn`` degrees since the last: 2 where
+        the view samples the volume finely (judged where a history ``starts``: the first frame, or a turn beyond
+        ``max_turn``, a cut) or turns fast for its sampling (with hysteresis, over the last frames' turns times their
+        pixels per voxel), else 1."""
         pixels_per_voxel = self.caster.pixels_per_voxel(camera, self.size[1])
-        if self.previous_camera is None or turn > self.max_turn:  # a new history, or a cut (a jump, not a turn)
+        if starts:
             self._fine = pixels_per_voxel >= STRETCH_FROM
             self._turns.clear()
             self._fast = False
@@ -197,13 +212,22 @@ class Pipeline(KeepsLastFrame):
 
     def render(self, camera: Camera) -> np.ndarray:
         """The upscaled image for ``camera``: float32 (H, W, 3) in [0, 1], H, W = ``size``."""
+        turn = view_rotation(camera, self.previous_camera)
+        starts = self.previous_camera is None or turn > self.max_turn  # a new history, or a cut (a jump, not a turn)
         if self.auto_stretch:
-            self._use(self._auto_stretch(camera))
+            self._use(self._auto_stretch(camera, turn, starts))
+        judged = self.slabs_by_look and (starts or self._look_slabs is None)
+        self.slabs = self.upscaler.slabs if judged or not self.slabs_by_look else self._look_slabs
         w, h = self.low_resolution_size
         jitter = halton_jitter(self.frame, jitter_phases(self.model_scale))
         started = time.perf_counter()
         lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame,
                                 slabs=self.slabs, on_device=self.upscaler.on_device)
+        if judged:
+            self._look_slabs = self.slabs if behind_front_share(lr.slabs) >= SLAB_SHARE else 1
+            if self._look_slabs < self.slabs:
+                lr = dataclasses.replace(lr, slabs=composited(lr.slabs))
+                self.slabs = self._look_slabs
         rendered = time.perf_counter()
         image = self.upscaler.upscale(lr, self.caster.background)  # stretched by the upscaler of this stretch
         done = ready_at(image)

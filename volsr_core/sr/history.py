@@ -69,7 +69,8 @@ class HistoryFeed:
     ``rotation`` and ``pixels_per_voxel`` as :class:`~volsr_core.temporal.taau.TemporalUpsampler` takes
     them, the last passed on only for a network with ``taau_fine_sampling``); a network with ``taau_slabs``
     also takes the frame's ``slabs`` (K, h, w, SLAB_CHANNELS) and the ``background`` they composite over,
-    and its estimate is the layered TAAU's of them; ``slabs`` (the constructor's) overrides the config's
+    and its estimate is the layered TAAU's of them (a frame in another K than the last starts its history afresh:
+    ``Pipeline``'s slabs by look); ``slabs`` (the constructor's) overrides the config's
     ``taau_slabs``, as the upscaler's ``slabs`` does (0: the TAAU on the frame's colour). ``feed.keep(output)``
     hands it the network's output for that frame (a recurrent network's next history). :meth:`reset` is a cut.
     ``device`` "cuda" runs the TAAU (or the layered TAAU) on the GPU (:mod:`volsr_core.temporal.cuda`): frames and
@@ -118,9 +119,8 @@ class HistoryFeed:
         caller done with the last one (else each estimate is a new array)."""
         estimate = None
         if self.slabs and self.mode == "taau":  # told the pixels per voxel always, as the upscaler runs it
-            if slabs is None or np.shape(slabs)[0] != self.slabs:
-                raise ValueError(f"the layered TAAU of {self.slabs} depth slabs takes each frame's slabs, got "
-                                 f"{None if slabs is None else np.shape(slabs)}")
+            if slabs is None:  # any count: a frame in another count than the last starts the history afresh
+                raise ValueError("the layered TAAU takes each frame's depth slabs, got none")
             estimate = [self.taau(slabs, jitter, background, rotation, pixels_per_voxel, out=out)]
         elif self.taau is not None:
             estimate = [self.taau(colour, motion, jitter, depth, rotation,
