@@ -39,7 +39,7 @@ def main() -> None:
         truth = {t: render_supersampled(caster, camera, size, size, spp=16, seed=10**6 + t * 16)
                  for t, camera in enumerate(cameras) if t >= WARMUP}
         methods: dict[str, Method] = {}
-        for k in (1, 2):  # VolSR XS 4x in 2 slabs, VolSR XS 2x + bicubic 2x
+        for k in (1, 2):  # VolSR XS 4x in 1 or 2 slabs, VolSR XS 2x + bicubic 2x
             method = VolSR(Pipeline(scene.volume, scene.transfer_function, variant="XS", scale=4, size=(size, size),
                                     stretch=k), "XS")
             methods[method.label] = method

@@ -39,7 +39,7 @@ def main() -> None:
         for k in (float(s) for s in args.steps.split(",")):
             coarse = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign",
                                sample_distance=default_step * k)
-            methods[("VolSR XS 4x in 2 slabs", k)] = VolSR(Pipeline(
+            methods[("VolSR XS 4x in 1 or 2 slabs", k)] = VolSR(Pipeline(
                 scene.volume, scene.transfer_function, variant="XS", scale=4, size=(size, size),
                 sample_distance=default_step * k), "XS")
             methods[("native 1/4 size + bilinear", k)] = ReducedSize(coarse, (size, size), 4)

@@ -37,7 +37,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after the backend is chosen
 
 WARMUP = 4
-LAYERED, STRETCHED = "VolSR XS 4x in 2 slabs", "VolSR XS 2x + bicubic 2x"
+LAYERED, STRETCHED = "VolSR XS 4x in 1 or 2 slabs", "VolSR XS 2x + bicubic 2x"
 
 
 def margins(spec: str, size: int, degrees: float) -> tuple[float, float, float]:

@@ -54,7 +54,8 @@ def test_one_slab_moves_with_the_opacity_weighted_mean_point():
 
 def test_slabs_composited_into_one_give_the_frames_alpha_and_their_seen_motion():
     """:func:`~volsr_core.render.slabs.composited` of a render in three slabs: the frame's alpha and premultiplied
-    colour; on made-up slabs, the motion weighted by what each slab adds to the composite's alpha, 0 where none shows."""
+    colour; on made-up slabs, the motion weighted by what each slab adds to the composite's alpha, 0 where none
+    shows."""
     volume = oblique_volume()
     camera = Camera.framing(volume.bounds, direction=(0.3, 1.0, -0.4), view_up=(0, 0, 1)).zoom(1.5)
     frame = RayCaster(volume, shaded_tf(), background=(0.2, 0.3, 0.4)).render(camera, 24, 20, slabs=3)

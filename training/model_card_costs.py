@@ -49,7 +49,8 @@ def cost_section(model_files: set[str], bench_paths: list[Path]) -> list[str]:
                 margin = next(p["margin_db"] for p in points if p["label"] == mine["label"])
                 slabs = mine.get("slabs", 0)  # runs before the slabs were recorded had none
                 stretch = mine.get("stretch", 1)  # and none was stretched
-                how = (f", {slabs} slabs" if slabs else "") + (f", + bicubic {stretch}x" if stretch > 1 else "")
+                how = (f", {slabs} slab{'' if slabs == 1 else 's'}" if slabs else "") \
+                    + (f", + bicubic {stretch}x" if stretch > 1 else "")
                 lines.append(f"| {run}{how} | {mine['volume']} | {mine['ms_render']:.1f} | {mine['ms_network']:.1f} | "
                              f"{mine['ms_total']:.1f} | {mine['psnr']:.2f} | {margin:+.2f} | "
                              f"{native['psnr']:.2f} dB in {native['ms_total']:.1f} ms |")
