@@ -1,4 +1,4 @@
-"""Frames made on the GPU, seen from the host: when one is ready, and its copy back.
+"""Frames made on the GPU, seen from the host: when one is ready, its copy back, and an array put beside it.
 
 Kernels launched by numba-cuda run asynchronously; a time taken right after a launch misses them. Every timed
 step that ends with a device array ends with :func:`ready_at`, and the copy to host memory, which a viewer showing
@@ -37,6 +37,15 @@ def channels(buffer: Any, start: int, stop: int | None = None) -> Any:
         ((height, width, count), (row, column, channel))
     return type(buffer)(shape=shape, strides=strides, dtype=buffer.dtype, stream=buffer.stream,
                         gpu_data=buffer.gpu_data.view(begin, end))
+
+
+def placed_like(host: np.ndarray, array: Any) -> Any:
+    """``host`` where ``array`` lives: copied to the GPU for a device array, as it is for a host one."""
+    if not is_device_array(array):
+        return host
+    from numba import cuda
+
+    return cuda.to_device(host)
 
 
 def ready_at(array: Any) -> float:

@@ -17,7 +17,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from volsr_core.render.device import ready_at, to_host
+from volsr_core.render.device import placed_like, ready_at, to_host
 from volsr_core.render.raycaster import RayCaster
 from volsr_core.render.slabs import behind_front_share, composited
 from volsr_core.runtime.engines import open_engine
@@ -34,7 +34,7 @@ STRETCH_FROM = 2.0  # stretch "auto": by 2 where a voxel spans at least this man
 # pixels per voxel (from about 2.3° at 512² on the bench's volumes, 4.7° at 256²), back below 2.5 (docs/performance.md)
 FAST_TURN = (2.5, 3.5)
 TURN_FRAMES = 3  # ... taken as the median of the last this many frames
-# depth slabs by look (``slabs`` None, a base-filter model on slabs, on the CPU): the model's two slabs where those
+# depth slabs by look (``slabs`` None, a base-filter model on slabs): the model's two slabs where those
 # behind the front add at least this share of a new history's first frame's opacity, else one (docs/performance.md,
 # "Depth slabs by look"): on an opaque look the back slab is mostly hidden and two cost more than they separate
 SLAB_SHARE = 0.2
@@ -89,8 +89,8 @@ class Pipeline(KeepsLastFrame):
       history per slab (docs/temporal.md, "Layered history"); only for a base-filter model on TAAU (XS) or a
       network trained on the layered TAAU (``taau_slabs``); 0 runs the TAAU on the frame's colour; None (the
       default) the model's own (:func:`~volsr_core.runtime.upscaler.default_slabs`: those it was trained on, two for
-      the shipped XS 4x and U-Nets, else two for XS at 4x and more, else 0), and for a base-filter model (XS) on the
-      CPU by look: judged at each new history (as stretch "auto" judges), on its first frame rendered in the
+      the shipped XS 4x and U-Nets, else two for XS at 4x and more, else 0), and for a base-filter model (XS) by
+      look: judged at each new history (as stretch "auto" judges), on its first frame rendered in the
       model's slabs, the model's count where the slabs behind the front add at least :data:`SLAB_SHARE` of the frame's
       opacity (:func:`~volsr_core.render.slabs.behind_front_share`), else one slab (that frame's slabs composited into
       one): :attr:`slabs` is the count of the last frame, :attr:`slabs_by_look` says whether it is chosen so.
@@ -123,7 +123,7 @@ class Pipeline(KeepsLastFrame):
                                                        device=device, stretch=k))
         self.auto_stretch = len(self._paths) > 1
         self._by_look = {k: slabs is None and upscaler.base_filter is not None and upscaler.slabs > 1
-                         and not upscaler.on_device for k, (_, upscaler) in self._paths.items()}
+                         for k, (_, upscaler) in self._paths.items()}
         self._look_slabs: int | None = None  # slabs by look: the count chosen for the current history
         self.max_turn = float(max_turn)  # a turn beyond it is a cut: stretch "auto" starts its choice afresh too
         self._fine = self._fast = False  # stretch "auto": the view samples the volume finely; it turns fast
@@ -223,10 +223,11 @@ class Pipeline(KeepsLastFrame):
         started = time.perf_counter()
         lr = self.caster.render(camera, w, h, jitter=jitter, previous_camera=self.previous_camera, seed=self.frame,
                                 slabs=self.slabs, on_device=self.upscaler.on_device)
-        if judged:
-            self._look_slabs = self.slabs if behind_front_share(lr.slabs) >= SLAB_SHARE else 1
+        if judged:  # on the GPU the slabs come to the host and back, once a history
+            slabs = to_host(lr.slabs)[0]
+            self._look_slabs = self.slabs if behind_front_share(slabs) >= SLAB_SHARE else 1
             if self._look_slabs < self.slabs:
-                lr = dataclasses.replace(lr, slabs=composited(lr.slabs))
+                lr = dataclasses.replace(lr, slabs=placed_like(composited(slabs), lr.slabs))
                 self.slabs = self._look_slabs
         rendered = time.perf_counter()
         image = self.upscaler.upscale(lr, self.caster.background)  # stretched by the upscaler of this stretch
