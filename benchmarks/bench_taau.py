@@ -143,18 +143,22 @@ def orbit_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--scales", default="2,4")
     parser.add_argument("--degrees", type=float, default=2.0)
     parser.add_argument("--frames", type=int, default=12)
+    parser.add_argument("--start", type=float, default=0.0, help="the orbit's first view this many degrees round "
+                        "from the anterior one (a multiple of --degrees)")
     parser.add_argument("--against", metavar="COMMIT")
     return parser
 
 
 def orbit_scene(args: argparse.Namespace) -> tuple[BenchVolume, RayCaster, list]:
     """The bench volume of ``args.volume`` (a bare file name is looked for in ``../shared/data/volumes``), its
-    ray caster (ray starts jittered, as ``volsr bench`` renders) and the orbit's cameras."""
+    ray caster (ray starts jittered, as ``volsr bench`` renders) and the orbit's cameras, from ``args.start`` degrees
+    round (0: the bench's anterior start)."""
     spec = args.volume if args.volume.startswith("phantom") or Path(args.volume.split(":")[0]).exists() \
         else str(DATA / args.volume)
     scene = load_bench_volume(spec)
     caster = RayCaster(scene.volume, scene.transfer_function, start_jitter="ign")
-    return scene, caster, orbit_around(caster.visible_bounds(), args.frames, args.degrees)
+    skipped = round(args.start / args.degrees)
+    return scene, caster, orbit_around(caster.visible_bounds(), skipped + args.frames, args.degrees)[skipped:]
 
 
 def main() -> None:
