@@ -7,7 +7,7 @@ from test_render_reference import oblique_volume, shaded_tf
 
 from volsr_core.render import RayCaster
 from volsr_core.render.layout import OUT_CHANNELS, OUT_DEPTH
-from volsr_core.render.slabs import behind_front_share, composited
+from volsr_core.render.slabs import composited, mixed_share
 from volsr_core.scene import Camera, TransferFunction, Volume
 
 FEATURES = slice(OUT_DEPTH, OUT_CHANNELS)  # a frame's channels after its colour and alpha
@@ -73,16 +73,20 @@ def test_slabs_composited_into_one_give_the_frames_alpha_and_their_seen_motion()
     assert np.all(one[2] == 0.0)
 
 
-def test_the_share_behind_the_front_slab_is_what_the_back_adds_to_the_composites_alpha():
-    """:func:`~volsr_core.render.slabs.behind_front_share`: analytic on made-up slabs, 0 for one slab or nothing
-    shown; on two plates, near 0 with the back plate hidden behind an opaque front, and a good part with two alike
-    faint ones (the back plate, further away, covers fewer pixels)."""
-    slabs = np.zeros((2, 2, 2, 6), dtype=np.float32)
-    slabs[0, ..., 3], slabs[1, ..., 3] = 0.5, 1.0  # each pixel: 0.5 in front, 0.5 more behind
-    assert behind_front_share(slabs) == pytest.approx(0.5)
-    slabs[0, 0, 0, 3] = 1.0  # one pixel opaque in front: the back adds 1.5 of 3.5
-    assert behind_front_share(slabs) == pytest.approx(1.5 / 4.0)
-    assert behind_front_share(slabs[:1]) == 0.0 and behind_front_share(np.zeros_like(slabs)) == 0.0
+def test_the_mixed_share_counts_the_shown_pixels_where_two_slabs_each_add_to_the_composite():
+    """:func:`~volsr_core.render.slabs.mixed_share`: counted on made-up slabs (a slab seen through an opaque front adds
+    nothing; one behind an empty front mixes with nothing), 0 for one slab or nothing shown; on two plates, none with
+    the back plate hidden behind an opaque front and most pixels with two alike faint ones; on two cubes, none where
+    the view shows them side by side and a good part once it has turned to line them up."""
+    slabs = np.zeros((3, 2, 3, 6), dtype=np.float32)
+    slabs[0, 0, :, 3] = (0.5, 1.0, 0.0)  # front: half, opaque, empty
+    slabs[1, 0, :, 3] = (0.2, 1.0, 1.0)  # middle: seen at 0.1, hidden, alone
+    slabs[2, 0, 0, 3] = 0.06  # back: seen at 0.06 * 0.4 = 0.024, too little
+    assert mixed_share(slabs) == pytest.approx(1 / 3)  # three shown pixels, the first mixes two slabs
+    assert mixed_share(slabs, seen=0.2) == 0.0
+    slabs[1, 1, 0, 3] = slabs[2, 1, 0, 3] = 0.5  # a fourth pixel shown: 0.5 and 0.25 added
+    assert mixed_share(slabs) == pytest.approx(2 / 4)
+    assert mixed_share(slabs[:1]) == 0.0 and mixed_share(np.zeros_like(slabs)) == 0.0
     camera = Camera.framing(plates(True, True).bounds, direction=(0.05, 0.1, 1.0), view_up=(0, 1, 0)).zoom(1.3)
     white = [[0.0, 1.0, 1.0, 1.0], [500.0, 1.0, 1.0, 1.0]]
     opaque_front = TransferFunction(color=white, scalar_opacity=[[250.0, 0.0], [300.0, 0.3], [500.0, 1.0]])
@@ -90,7 +94,26 @@ def test_the_share_behind_the_front_slab_is_what_the_back_adds_to_the_composites
     hidden = RayCaster(plates(True, True), opaque_front).render(camera, 16, 16, slabs=2).slabs
     both = RayCaster(plates(True, True), alike).render(camera, 16, 16, slabs=2).slabs
     assert (hidden[1, ..., 3] > 0.1).mean() > 0.2, "the back plate is in the back slab, hidden or not"
-    assert behind_front_share(hidden) < 0.05 < 0.2 < behind_front_share(both) < 0.5  # measured: 0.0 and 0.26
+    assert mixed_share(hidden) == 0.0 and mixed_share(both) > 0.5
+    side_by_side = Camera.framing(cubes().bounds, direction=(0.0, 0.0, 1.0), view_up=(0, 1, 0))
+    shares = [mixed_share(RayCaster(cubes(), faint_white()).render(c, 32, 32, slabs=2).slabs)
+              for c in (side_by_side, side_by_side.azimuth(45.0))]
+    assert shares[0] == 0.0 and shares[1] > 0.3, shares  # measured: 0.0 and 0.67
+
+
+def cubes() -> Volume:
+    """Two 8-voxel cubes (value 500) in a 40³ volume, one near the front left, one at the back right as seen along z:
+    side by side from there, lined up along the view turned 45° about y."""
+    array = np.zeros((40, 40, 40), dtype=np.float32)
+    array[4:12, 16:24, 4:12] = 500.0
+    array[28:36, 16:24, 28:36] = 500.0
+    return Volume(array, spacing=(1.0, 1.0, 1.0))
+
+
+def faint_white() -> TransferFunction:
+    """White, faint from 300 up: a cube seen through another shows."""
+    return TransferFunction(color=[[0.0, 1.0, 1.0, 1.0], [500.0, 1.0, 1.0, 1.0]],
+                            scalar_opacity=[[250.0, 0.0], [300.0, 0.05], [500.0, 0.05]])
 
 
 def plates(front: bool, back: bool) -> Volume:

@@ -396,8 +396,8 @@ def add_upscale_parser(sub) -> None:
                     help="render each frame in K depth slabs, each with its own TAAU history (the layered TAAU, "
                     "docs/temporal.md), for an XS model or a network trained on it to refine; 0: the TAAU on the "
                     "frame's colour [auto: the slabs the model was trained on (2 for the shipped XS 4x and U-Nets), "
-                    "else 2 for XS at 4x and more, else 0; for XS 1 instead of 2 where the look is opaque, "
-                    "judged at each new history]")
+                    "else 2 for XS at 4x and more, else 0; for XS 1 instead of 2 where few pixels show two slabs at "
+                    "once, judged at each new history]")
     up.add_argument("--stretch", type=parse_stretch, default="auto", metavar="auto|K",
                     help="run the model at 1/K of --size and stretch its image by K to it (bicubic): --scale 4 "
                     "--stretch 2 renders at 1/4 size and runs the 2x model to 1/2 size, as near the curve of "

@@ -53,7 +53,7 @@ class VolSRPostProcess:
       (None model: the shipped one of ``variant`` at ``scale`` / ``stretch``, by default VolSR XS 2x, the model
       that pays off on a CPU; a model file upscales by its own scale; None slabs: the model's own (those it was
       trained on: two for the shipped XS 4x and U-Nets), else two depth slabs for XS at 4x and more, XS taking one
-      where the look is opaque (``Pipeline``'s slabs by look); ``stretch`` 2
+      where few pixels show two slabs at once, as an opaque look (``Pipeline``'s slabs by look); ``stretch`` 2
       at ``scale`` 4: the 2x model to half the viewport, stretched bicubically; "auto", the default: so where a voxel
       spans two or more viewport pixels (judged at each new history) or while the view turns fast for its sampling);
     - ``layer``: the window layer of the overlay renderer (default: the host renderer's + 1;

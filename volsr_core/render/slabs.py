@@ -1,5 +1,5 @@
 """A frame's depth slabs (``RayCaster.render(..., slabs=K)``, :attr:`~volsr_core.render.features.FeatureFrame.slabs`)
-seen as a whole: how much of its opacity lies behind the front slab, and the K slabs composited into one.
+seen as a whole: where two of them mix in one pixel, and the K slabs composited into one.
 
 Slabs are (K, H, W, SLAB_CHANNELS) float32, nearest first: per slab the premultiplied RGB and alpha of its samples
 alone (``SLAB_RGBA``) and the motion vector of their opacity-weighted mean point (``SLAB_MOTION``, pixels).
@@ -10,15 +10,21 @@ import numpy as np
 
 from volsr_core.render.layout import SLAB_MOTION, SLAB_RGBA
 
+SHOWN = 1e-3  # a pixel whose composite alpha is above this shows something
+MIXED_SEEN = 0.05  # a slab that adds at least this to a pixel's composite alpha is seen there
 
-def behind_front_share(slabs: np.ndarray) -> float:
-    """The share of the frame's opacity (the sum over its pixels of the composite alpha) that the slabs behind the
-    first add, seen through it: 0 where the front slab holds everything the view shows (an opaque look, or a frame
-    in one slab), towards 1 where most of what shows lies behind it; 0 for an empty frame."""
+
+def mixed_share(slabs: np.ndarray, seen: float = MIXED_SEEN) -> float:
+    """The share of the frame's shown pixels (composite alpha above :data:`SHOWN`) where two slabs or more each add at
+    least ``seen`` to the composite's alpha (a slab's alpha times the transmittance of those in front of it): where
+    one history per pixel would blend layers that move apart under rotation. 0 for a frame in one slab, one that shows
+    nothing, or a look whose front hides what lies behind it."""
     alpha = slabs[..., SLAB_RGBA + 3].astype(np.float64)
-    whole = 1.0 - np.prod(1.0 - alpha, axis=0)
-    total = float(whole.sum())
-    return 0.0 if total <= 0.0 else float((whole - alpha[0]).sum()) / total
+    behind = np.cumprod(1.0 - alpha, axis=0)  # transmittance behind each slab
+    added = alpha * np.concatenate([np.ones_like(alpha[:1]), behind[:-1]], axis=0)
+    shown = behind[-1] < 1.0 - SHOWN
+    count = int(shown.sum())
+    return 0.0 if count == 0 else float(((added >= seen).sum(axis=0) >= 2)[shown].sum()) / count
 
 
 def composited(slabs: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ import numpy as np
 
 from volsr_core.render.device import placed_like, ready_at, to_host
 from volsr_core.render.raycaster import RayCaster
-from volsr_core.render.slabs import behind_front_share, composited
+from volsr_core.render.slabs import composited, mixed_share
 from volsr_core.runtime.engines import open_engine
 from volsr_core.runtime.upscaler import StatefulUpscaler
 from volsr_core.scene.camera import Camera
@@ -34,10 +34,11 @@ STRETCH_FROM = 2.0  # stretch "auto": by 2 where a voxel spans at least this man
 # pixels per voxel (from about 2.3° at 512² on the bench's volumes, 4.7° at 256²), back below 2.5 (docs/performance.md)
 FAST_TURN = (2.5, 3.5)
 TURN_FRAMES = 3  # ... taken as the median of the last this many frames
-# depth slabs by look (``slabs`` None, a base-filter model on slabs): the model's two slabs where those
-# behind the front add at least this share of a new history's first frame's opacity, else one (docs/performance.md,
-# "Depth slabs by look"): on an opaque look the back slab is mostly hidden and two cost more than they separate
-SLAB_SHARE = 0.2
+# depth slabs by look (``slabs`` None, a base-filter model on slabs): the model's two slabs where at least this share
+# of a new history's first frame's shown pixels mix two slabs (render.slabs.mixed_share), else one
+# (docs/performance.md, "Depth slabs by look"): where the front hides what lies behind it, or nothing lies behind it,
+# two slabs cost more render time than they keep apart
+MIXED_SHARE = 0.03
 
 
 class KeepsLastFrame:
@@ -91,9 +92,9 @@ class Pipeline(KeepsLastFrame):
       default) the model's own (:func:`~volsr_core.runtime.upscaler.default_slabs`: those it was trained on, two for
       the shipped XS 4x and U-Nets, else two for XS at 4x and more, else 0), and for a base-filter model (XS) by
       look: judged at each new history (as stretch "auto" judges), on its first frame rendered in the
-      model's slabs, the model's count where the slabs behind the front add at least :data:`SLAB_SHARE` of the frame's
-      opacity (:func:`~volsr_core.render.slabs.behind_front_share`), else one slab (that frame's slabs composited into
-      one): :attr:`slabs` is the count of the last frame, :attr:`slabs_by_look` says whether it is chosen so.
+      model's slabs, the model's count where at least :data:`MIXED_SHARE` of the frame's shown pixels mix two slabs
+      (:func:`~volsr_core.render.slabs.mixed_share`), else one slab (that frame's slabs composited into one):
+      :attr:`slabs` is the count of the last frame, :attr:`slabs_by_look` says whether it is chosen so.
 
     ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``last_timings`` holds the ms spent
     rendering and upscaling that frame (``render_ms``, ``network_ms`` with the stretch, ``total_ms``: on the GPU
@@ -225,7 +226,7 @@ class Pipeline(KeepsLastFrame):
                                 slabs=self.slabs, on_device=self.upscaler.on_device)
         if judged:  # on the GPU the slabs come to the host and back, once a history
             slabs = to_host(lr.slabs)[0]
-            self._look_slabs = self.slabs if behind_front_share(slabs) >= SLAB_SHARE else 1
+            self._look_slabs = self.slabs if mixed_share(slabs) >= MIXED_SHARE else 1
             if self._look_slabs < self.slabs:
                 lr = dataclasses.replace(lr, slabs=placed_like(composited(slabs), lr.slabs))
                 self.slabs = self._look_slabs
