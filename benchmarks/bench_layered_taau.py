@@ -4,6 +4,7 @@ them.
 
     python benchmarks/bench_layered_taau.py [--volume CT_AVM.nii.gz:CT-AAA:0,446] [--sizes 512] [--scales 2,4]
                                             [--slabs 2,4] [--degrees 2] [--frames 12] [--stretch 2]
+                                            [--model runs/xs2x_layered/volsr-XS-2x.onnx ...]
 
 Every method renders every frame of the orbit (interleaved frame by frame, the ray caster's start jitter on, as
 ``volsr bench`` renders); PSNR against the 16-spp reference is the mean over the frames after the first four,
@@ -11,9 +12,13 @@ times are medians over the same frames. The curve runs through native 1 spp and 
 size + bilinear points (:func:`~volsr_core.apps.bench.report.curve_psnr_at`, the bench's target 2); each TAAU
 and VolSR row gives its distance to it at its own time. VolSR rows run the shipped XS model of each scale that has
 one (2 threads). ``--stretch 2`` runs those models at half the size, stretched bicubically
-(``Pipeline(..., stretch=2)``: "VolSR XS 2x + bicubic 2x" is a 4x point), and leaves out the TAAU rows.
+(``Pipeline(..., stretch=2)``: "VolSR XS 2x + bicubic 2x" is a 4x point), and leaves out the TAAU rows. Each
+``--model`` file (an XS model not shipped, as ``volsr train`` and ``export_onnx`` make it) runs beside them, at its own
+scale and the same slab counts, its rows named by the file's folder.
 """
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 from bench_taau import orbit_parser, orbit_scene
@@ -34,6 +39,8 @@ def main() -> None:
     parser.set_defaults(sizes="512")
     parser.add_argument("--slabs", default="2,4")
     parser.add_argument("--stretch", type=int, default=1, help="the XS models at 1/k of the size, stretched by k")
+    parser.add_argument("--model", action="append", default=[], type=Path,
+                        help="an XS model file to run beside the shipped ones (repeatable)")
     args = parser.parse_args()
     scene, caster, cameras = orbit_scene(args)
     shipped = {(entry["variant"], int(entry["scale"])) for entry in shipped_models()}
@@ -47,6 +54,9 @@ def main() -> None:
                                     size=shape, threads=2, slabs=k, stretch=args.stretch), "XS")
                      for s in args.scales.split(",") if ("XS", int(s)) in shipped
                      for k in [0] + [int(k) for k in args.slabs.split(",")]]
+        temporal += [VolSR(Pipeline(scene.volume, scene.transfer_function, path, size=shape, threads=2, slabs=k,
+                                    stretch=args.stretch), f"XS ({path.parent.name})")
+                     for path in args.model for k in [0] + [int(k) for k in args.slabs.split(",")]]
         scores: dict[str, list[float]] = {m.label: [] for m in curve + temporal}
         ms: dict[str, list[tuple[float, float]]] = {m.label: [] for m in curve + temporal}
         for t, camera in enumerate(cameras):
