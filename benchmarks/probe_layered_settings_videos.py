@@ -44,10 +44,14 @@ def main() -> None:
     args = parser.parse_args()
     weights, bias = OnnxEngine(MODELS / f"volsr-XS-{args.scale}x.onnx").base_filter
     manifest, s = read_json(args.dataset / "manifest.json"), args.scale
-    rows = ["TAAU"] + [f"layered, {k} slab{'s' * (k > 1)}, {name}" for k in (1, 2) for name in VARIANTS]
+    if manifest is None:
+        parser.error(f"{args.dataset / 'manifest.json'}: missing or not JSON (make it with `volsr dataset`)")
     scores: dict[str, dict[str, list[tuple[float, float]]]] = defaultdict(lambda: defaultdict(list))
     for video in tqdm(manifest["videos"], desc="videos", unit="video"):
         with h5py.File(args.dataset / video["file"], "r") as h5:
+            if f"lr{s}/slabs" not in h5:
+                parser.error(f"{args.dataset / video['file']}: no depth slabs at {s}x "
+                             f"(make the dataset with `slabs: 2`)")
             colour, motion, jitter, slabs = (h5[f"lr{s}/{k}"][()].astype(np.float32)
                                              for k in ("color", "motion", "jitter", "slabs"))
             depth = h5[f"lr{s}/motion_depth"][()].astype(np.float32)
@@ -72,7 +76,7 @@ def main() -> None:
                         scores[group][label].append(score)
     print(f"\n{args.dataset}, {s}x, frames {WARMUP} on: mean PSNR dB, the estimate / XS {s}x's filter on it\n")
     print("| estimate | " + " | ".join(scores) + " |\n|---|" + "---:|" * len(scores))
-    for label in rows:
+    for label in next(iter(scores.values())):  # the rows in the order they ran
         cells = [" / ".join(f"{v:.2f}" for v in np.mean(scores[group][label], axis=0)) for group in scores]
         print(f"| {label} | " + " | ".join(cells) + " |")
 
