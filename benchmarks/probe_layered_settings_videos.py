@@ -26,10 +26,10 @@ from volsr_core.dataset.store import frame_pixels_per_voxel, read_json, view_rot
 from volsr_core.render.slabs import composited
 from volsr_core.runtime.base_filter import filter_image
 from volsr_core.runtime.engines import OnnxEngine
+from volsr_core.runtime.models import model_file
 from volsr_core.temporal.layered import LayeredUpsampler
 from volsr_core.temporal.taau import TemporalUpsampler
 
-MODELS = Path(__file__).resolve().parents[1] / "resources" / "models"
 VARIANTS = {"as shipped": {},
             "sigma 0.35": {"sigma": 0.35},
             "sigma 0.35, cap_angle 2/3": {"sigma": 0.35, "cap_angle": 2.0 / 3.0},
@@ -42,7 +42,7 @@ def main() -> None:
     parser.add_argument("dataset", type=Path, help="a dataset folder made with `slabs: 2`")
     parser.add_argument("--scale", type=int, default=2, choices=(2, 4), help="2 or 4: the scales XS has a model at")
     args = parser.parse_args()
-    weights, bias = OnnxEngine(MODELS / f"volsr-XS-{args.scale}x.onnx").base_filter
+    weights, bias = OnnxEngine(model_file("XS", args.scale, "onnx")).base_filter
     manifest, s = read_json(args.dataset / "manifest.json"), args.scale
     if manifest is None:
         parser.error(f"{args.dataset / 'manifest.json'}: missing or not JSON (make it with `volsr dataset`)")
