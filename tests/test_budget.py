@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("onnxruntime")
 
 from volsr_core.io import make_phantom  # noqa: E402
-from volsr_core.runtime.budget import BudgetRenderer, Level, levels, unpaid  # noqa: E402
+from volsr_core.runtime.budget import ESTIMATE_WINDOW, BudgetRenderer, Level, levels, unpaid  # noqa: E402
 from volsr_core.runtime.methods import ReducedSize  # noqa: E402
 from volsr_core.runtime.models import PAYING_NETWORK_SHARE, model_file  # noqa: E402
 from volsr_core.scene import Volume, get_preset  # noqa: E402
@@ -53,7 +53,7 @@ def test_a_model_that_does_not_pay_is_left_out_and_never_drawn(scene):
     cameras = orbit_around(renderer.caster.visible_bounds(), 3, 2.0)
     for camera in cameras:
         renderer.render(camera)
-    cost = renderer.estimates
+    cost = renderer.timed  # as judged, before the frames drawn moved the estimates
     network = cost[Level(2, "S")] - cost[Level(2)]
     dropped = network > PAYING_NETWORK_SHARE * cost[Level(2, bilinear=True)]
     print(f"S 2x network {network:.1f} ms, LR render {cost[Level(2, bilinear=True)]:.1f} ms: dropped {dropped}")
@@ -93,24 +93,44 @@ def test_the_shipped_4x_level_follows_the_view_as_the_hosts_do(scene):
         assert list(renderer.state.ms_estimates) == ["VolSR XS 4x"], "its estimate is the level's, either way"
 
 
-def test_a_budget_below_the_2x_model_takes_taau_2x_before_any_4x_level(scene):
-    """TAAU at 2x costs an LR render and a few ms; a budget it fits, and the 2x model does not, draws it,
-    not the 4x model (measured: any 2x method beats every 4x one, docs/performance.md)."""
+def test_a_budget_taau_2x_fits_draws_it_before_the_4x_levels(scene):
+    """TAAU at 2x costs an LR render and a few ms; a budget it fits with room, and native does not, draws it, not
+    the 4x levels, which fit it too (measured: any 2x method beats every 4x one, docs/performance.md)."""
     volume, tf, files = scene
-    choices = [Level(1), Level(2, "S"), Level(2), Level(4, "S"), Level(4)]
-    probe = BudgetRenderer(volume, tf, 1e6, size=SIZE, choices=choices, model_files=files, threads=2)
-    cameras = orbit_around(probe.caster.visible_bounds(), 12, 2.0)
-    probe.render(cameras[0])
-    cost = probe.estimates
+    choices = [Level(1), Level(2), Level(4, "S"), Level(4)]
+    renderer = BudgetRenderer(volume, tf, 1e6, size=SIZE, choices=choices, model_files=files, threads=2)
+    cameras = orbit_around(renderer.caster.visible_bounds(), 12, 2.0)
+    renderer.render(cameras[0])  # times every level, then draws native (the ample budget)
+    cost = dict(renderer.estimates)
     print({level.label: round(ms, 1) for level, ms in cost.items()})
-    assert cost[Level(2)] < 0.7 * cost[Level(2, "S")], "TAAU 2x is much cheaper than the 2x model"
-    budget = (cost[Level(2)] + cost[Level(2, "S")]) / 2
-    renderer = BudgetRenderer(volume, tf, budget, size=SIZE, choices=choices, model_files=files, threads=2)
-    for camera in cameras:
+    assert cost[Level(2)] < 0.6 * cost[Level(1)], "TAAU 2x costs a quarter of the rays and a few ms"
+    # the budget lowered while moving, below native's cost as this renderer timed it (the 2x model's cost lay only
+    # 1.4-1.7 times TAAU 2x's here, and frame times vary by 20%: too close for a budget between those two)
+    budget = renderer.budget_ms = 0.9 * cost[Level(1)]
+    assert cost[Level(4, "S")] < budget and cost[Level(4)] < budget, "the 4x levels fit it too"
+    times = []
+    for camera in cameras[1:]:
         image = renderer.render(camera)
+        times.append(renderer.state.ms)
     assert renderer.state.level == "TAAU 2x"
     assert renderer.low_resolution_size == (SIZE[0] // 2, SIZE[1] // 2) and image.shape == (*SIZE[::-1], 3)
-    assert renderer.last_timings["total_ms"] <= 1.5 * budget
+    assert statistics.median(times) <= 1.2 * budget
+
+
+def test_one_slow_frame_does_not_move_a_level_off_the_budget(scene):
+    """A level's estimate is the median of its last frames: one frame three times the budget (a pause of the host)
+    leaves it drawing, where a running mean would drop it for good (a level not drawn is not timed again)."""
+    volume, tf, _ = scene
+    renderer = BudgetRenderer(volume, tf, 15.0, size=SIZE, choices=[Level(2), Level(4)], threads=2)
+    renderer.render(orbit_around(renderer.caster.visible_bounds(), 1, 2.0)[0])
+    renderer.current = Level(2)  # drawing it, whatever the first frame took
+    for _ in range(ESTIMATE_WINDOW):
+        renderer._record(Level(2), 10.0)  # frame times as a level draws them, given
+    renderer._record(Level(2), 45.0)
+    assert renderer.estimates[Level(2)] == 10.0 and renderer.choose() == Level(2)
+    for _ in range(ESTIMATE_WINDOW // 2):
+        renderer._record(Level(2), 45.0)
+    assert renderer.choose() == Level(4), "slow frames for most of the window do move it"
 
 
 def test_taau_levels_need_a_size_they_divide(scene):

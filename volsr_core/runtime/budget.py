@@ -1,8 +1,10 @@
 """Frame-budget rendering: per frame, the finest level that fits a time budget; still frames refine.
 
 As VTK's AutoAdjustSampleDistances picks its sample distance from the last frame times, a
-:class:`BudgetRenderer` keeps a running estimate of each level's ms per frame and renders every
-moving frame with the finest level whose estimate fits ``budget_ms``. The levels, finest first
+:class:`BudgetRenderer` keeps a running estimate of each level's ms per frame (the median of its last
+:data:`ESTIMATE_WINDOW` frames, so that one slow frame, a pause of the host or of another process, does not
+move it: a level left is not timed again until it draws) and renders every moving frame with the finest level
+whose estimate fits ``budget_ms``. The levels, finest first
 (:func:`levels`): native full size, then by the size of the rendered frame, from 1/2 down: at a
 scale the shipped models (largest variant first; at 4x following the view as the hosts do, ``stretch="auto"``),
 TAAU alone, then the reduced-size render stretched bilinearly (what VTK's ImageSampleDistance gives; also at
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import statistics
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -44,6 +47,7 @@ from volsr_core.temporal.jitter import halton_jitter
 VARIANT_ORDER = tuple(reversed(VARIANTS))  # larger first: better at the same scale
 BILINEAR_FACTORS = (2, 2.5, 3, 4, 5, 6, 8)  # reduced sizes drawn bilinearly: volsr bench's --factors and the gaps
 CALIBRATION_FRAMES = 3  # timed frames per level before the first frame (one frame alone was off by up to 25% here)
+ESTIMATE_WINDOW = 5  # a level's estimate: the median of its last this many frame times (the calibration's first)
 STILL_SEED = 10**6  # ray-start seeds of still samples, apart from the moving frames' (which count frames)
 
 
@@ -136,7 +140,8 @@ class BudgetState:
 
 
 class BudgetRenderer(KeepsLastFrame):
-    """Renders ``volume`` at ``size`` within ``budget_ms`` per moving frame (see the module docstring).
+    """Renders ``volume`` at ``size`` within ``budget_ms`` per moving frame (see the module docstring); the
+    ``budget_ms`` attribute may change between frames (a host's slider), the estimates kept.
 
     - ``choices``: the :class:`Level` list to choose from, finest first (default :func:`levels` of the
       shipped models, less the TAAU levels whose scale does not divide ``size``); ``model_files`` maps
@@ -144,14 +149,16 @@ class BudgetRenderer(KeepsLastFrame):
       as in the hosts, ``Pipeline(stretch="auto")``: the model of half the scale at half the size, stretched
       bicubically, where a voxel spans two output pixels or more or the view turns fast; the frame's ``state.level``
       then names it, e.g. 'VolSR XS 2x + bicubic 2x'). The model levels :func:`unpaid` finds
-      when the levels are timed are then dropped from ``choices``; ``left_out`` says why;
-    - ``smoothing``: weight of a new measurement in a level's running ms estimate;
+      when the levels are timed are then dropped from ``choices``; ``left_out`` says why, ``timed`` holds the
+      timings it judged (each level's median ms on the first camera);
+    - ``window``: a level's ms estimate is the median of its last ``window`` frame times, the
+      ``CALIBRATION_FRAMES`` timed first among them (one slow frame moves it by nothing);
     - ``finer_margin``: a finer level is taken only when its estimate is below this fraction of the
       budget (hysteresis: levels do not alternate frame by frame, which would drop the history);
     - ``device``, ``threads``, ``sample_distance``, ``background``: as :class:`Pipeline` takes them.
 
     Every level is timed on the first camera before the first frame (a warm-up frame, in which kernels
-    compile and sessions warm up, then the median of ``CALIBRATION_FRAMES``), which seeds the
+    compile and sessions warm up, then ``CALIBRATION_FRAMES`` timed ones), which seed the
     estimates. ``render(camera)`` returns float32 (H, W, 3) in [0, 1]; ``state`` says what the frame
     was. Like a :class:`Pipeline` it has ``size``, ``scale`` and
     ``low_resolution_size`` (the level drawn last; 1 and ``size`` while still), ``caster``,
@@ -162,7 +169,7 @@ class BudgetRenderer(KeepsLastFrame):
 
     def __init__(self, volume: Volume, transfer_function: TransferFunction, budget_ms: float, *,
                  size: tuple[int, int] = (512, 512), choices: Sequence[Level] | None = None,
-                 model_files: dict[Level, Any] | None = None, smoothing: float = 0.3, finer_margin: float = 0.9,
+                 model_files: dict[Level, Any] | None = None, window: int = ESTIMATE_WINDOW, finer_margin: float = 0.9,
                  device: str = "cpu", threads: int | None = None, sample_distance: float | None = None,
                  background: tuple[float, float, float] = (0.0, 0.0, 0.0)):
         if not budget_ms > 0:
@@ -170,7 +177,9 @@ class BudgetRenderer(KeepsLastFrame):
         from volsr_core.runtime.models import shipped_models
 
         self.budget_ms, self.size = float(budget_ms), (int(size[0]), int(size[1]))
-        self.smoothing, self.finer_margin = float(smoothing), float(finer_margin)
+        if window < 1:
+            raise ValueError(f"window must be at least 1 frame, got {window}")
+        self.finer_margin = float(finer_margin)
         if choices is None:
             choices = [lv for lv in levels(shipped_models()) if lv.variant is not None or lv.bilinear
                        or (self.size[0] % lv.scale == 0 and self.size[1] % lv.scale == 0)]
@@ -196,7 +205,9 @@ class BudgetRenderer(KeepsLastFrame):
                                                  sample_distance=sample_distance, background=background,
                                                  stretch="auto" if model is None else 1)
         self.estimates: dict[Level, float] = {}
+        self._recent: dict[Level, deque[float]] = {level: deque(maxlen=int(window)) for level in self.choices}
         self.left_out: dict[str, str] = {}
+        self.timed: dict[Level, float] = {}
         self.current: Level | None = None
         self.state = BudgetState()
         self.last_timings: dict[str, float] = {}
@@ -217,22 +228,26 @@ class BudgetRenderer(KeepsLastFrame):
 
     # timing ----------------------------------------------------------------------------------------
     def _calibrate(self, camera: Camera) -> None:
-        """One untimed frame of every level on ``camera``, then the median of ``CALIBRATION_FRAMES`` timed
-        ones; their histories are then dropped, and so are the levels :func:`unpaid` names."""
+        """One untimed frame of every level on ``camera``, then ``CALIBRATION_FRAMES`` timed ones, which
+        seed its estimate; their histories are then dropped, and so are the levels :func:`unpaid` names."""
         for level in self.choices:
             self._render_level(level, camera)
-            times = []
             for _ in range(CALIBRATION_FRAMES):
                 started = time.perf_counter()
                 self._render_level(level, camera)
-                times.append(1000.0 * (time.perf_counter() - started))
-            self.estimates[level] = statistics.median(times)
+                self._record(level, 1000.0 * (time.perf_counter() - started))
             if level in self.pipelines:
                 self.pipelines[level].reset("calibrated")
-        for level, why in unpaid(self.estimates).items():
+        self.timed = dict(self.estimates)
+        for level, why in unpaid(self.timed).items():
             self.choices.remove(level)
             del self.pipelines[level]  # its estimate stays, for the record
             self.left_out[level.label] = why
+
+    def _record(self, level: Level, ms: float) -> None:
+        """``ms`` the latest frame time of ``level``; its estimate, the median of the last ``window``."""
+        self._recent[level].append(ms)
+        self.estimates[level] = statistics.median(self._recent[level])
 
     def choose(self) -> Level:
         """The finest level whose estimate fits the budget (a finer one than the current only with margin);
@@ -286,8 +301,7 @@ class BudgetRenderer(KeepsLastFrame):
         else:
             self.last_timings, self.last_frame = {"render_ms": ms, "network_ms": 0.0, "total_ms": ms}, None
         if label != "still":
-            previous = self.estimates[self.current]
-            self.estimates[self.current] = (1.0 - self.smoothing) * previous + self.smoothing * ms
+            self._record(self.current, ms)
         self._last_camera = camera
         self.state = BudgetState(label, ms, self._still_count,
                                  {level.label: round(v, 2) for level, v in self.estimates.items()})
