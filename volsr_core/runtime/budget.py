@@ -232,13 +232,16 @@ class BudgetRenderer(KeepsLastFrame):
         seed its estimate; their histories are then dropped, and so are the levels :func:`unpaid` names."""
         for level in self.choices:
             self._render_level(level, camera)
+            times = []
             for _ in range(CALIBRATION_FRAMES):
                 started = time.perf_counter()
                 self._render_level(level, camera)
-                self._record(level, 1000.0 * (time.perf_counter() - started))
+                times.append(1000.0 * (time.perf_counter() - started))
+            self.timed[level] = statistics.median(times)
+            for ms in times:
+                self._record(level, ms)
             if level in self.pipelines:
                 self.pipelines[level].reset("calibrated")
-        self.timed = dict(self.estimates)
         for level, why in unpaid(self.timed).items():
             self.choices.remove(level)
             del self.pipelines[level]  # its estimate stays, for the record
